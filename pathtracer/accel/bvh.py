@@ -1,0 +1,254 @@
+"""Iterative binned-SAH BVH builder (host code, compiled with ``@njit``).
+
+Binning follows Wald 2007, "On fast Construction of SAH-based Bounding Volume Hierarchies":
+centroids are binned on all three axes, prefix/suffix sweeps give the SAH cost of every bin
+boundary, and the cheaper of the best split and a leaf wins. The tree is built with an
+explicit task stack (no recursion, as tinybvh's ``BVH::Build``) and written straight into
+the traversal layout of :mod:`pathtracer.kernels.traverse` (both child boxes in the parent).
+Triangles are reordered so every leaf is a contiguous range.
+"""
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from ..kernels.constants import STACK_SIZE
+
+# SAH constants: cost of one node visit relative to one triangle test.
+C_TRAVERSAL = 1.0
+C_INTERSECT = 1.0
+MAX_DEPTH = STACK_SIZE - 4  # deeper subtrees become leaves: the traversal stack never overflows
+
+
+class BVH(NamedTuple):
+    box: np.ndarray    # float32 (M, 12): child 0 min xyz, max xyz, child 1 min xyz, max xyz
+    child: np.ndarray  # int32 (M, 4): c0, n0, c1, n1 (see kernels.traverse)
+    order: np.ndarray  # int32 (N,): new triangle k is input triangle order[k]
+    depth: int
+
+
+@njit(cache=True)
+def _area(lo, hi):
+    dx = max(hi[0] - lo[0], 0.0)
+    dy = max(hi[1] - lo[1], 0.0)
+    dz = max(hi[2] - lo[2], 0.0)
+    return 2.0 * (dx * dy + dy * dz + dz * dx)
+
+
+@njit(cache=True)
+def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split):
+    n = tri_lo.shape[0]
+    order = np.arange(n).astype(np.int32)
+    max_nodes = max(1, n)
+    box = np.zeros((max_nodes, 12), np.float32)
+    child = np.full((max_nodes, 4), -1, np.int32)
+    n_nodes = 1
+    # tasks: (start, end, parent node, side, depth)
+    tasks = np.zeros((4 * STACK_SIZE + 8, 5), np.int64)
+    n_tasks = 1
+    tasks[0, 0] = 0
+    tasks[0, 1] = n
+    tasks[0, 2] = -1
+    tasks[0, 3] = 0
+    tasks[0, 4] = 0
+    bin_lo = np.empty((3, n_bins, 3))
+    bin_hi = np.empty((3, n_bins, 3))
+    bin_n = np.empty((3, n_bins), np.int64)
+    right_area = np.empty(n_bins)
+    right_n = np.empty(n_bins, np.int64)
+    lo = np.empty(3)
+    hi = np.empty(3)
+    clo = np.empty(3)
+    chi = np.empty(3)
+    acc_lo = np.empty(3)
+    acc_hi = np.empty(3)
+    max_depth = 0
+    if n == 0:
+        child[0, 1] = -1
+        child[0, 3] = -1
+        return box, child, order, 1, 0
+    while n_tasks > 0:
+        n_tasks -= 1
+        start = tasks[n_tasks, 0]
+        end = tasks[n_tasks, 1]
+        parent = tasks[n_tasks, 2]
+        side = tasks[n_tasks, 3]
+        depth = tasks[n_tasks, 4]
+        max_depth = max(max_depth, depth)
+        count = end - start
+        # Bounds of the range's triangles and of their centroids.
+        for a in range(3):
+            lo[a] = np.inf
+            hi[a] = -np.inf
+            clo[a] = np.inf
+            chi[a] = -np.inf
+        for k in range(start, end):
+            t = order[k]
+            for a in range(3):
+                lo[a] = min(lo[a], tri_lo[t, a])
+                hi[a] = max(hi[a], tri_hi[t, a])
+                clo[a] = min(clo[a], centroid[t, a])
+                chi[a] = max(chi[a], centroid[t, a])
+        # Find the best binned split.
+        best_cost = np.inf
+        best_axis = -1
+        best_bin = 0
+        parent_area = _area(lo, hi)
+        if count >= min_leaf_split and depth < MAX_DEPTH:
+            for a in range(3):
+                for b in range(n_bins):
+                    bin_n[a, b] = 0
+                    for c in range(3):
+                        bin_lo[a, b, c] = np.inf
+                        bin_hi[a, b, c] = -np.inf
+            for k in range(start, end):
+                t = order[k]
+                for a in range(3):
+                    extent = chi[a] - clo[a]
+                    if extent > 0.0:
+                        b = int((centroid[t, a] - clo[a]) * (n_bins / extent))
+                        b = min(b, n_bins - 1)
+                        bin_n[a, b] += 1
+                        for c in range(3):
+                            bin_lo[a, b, c] = min(bin_lo[a, b, c], tri_lo[t, c])
+                            bin_hi[a, b, c] = max(bin_hi[a, b, c], tri_hi[t, c])
+            for a in range(3):
+                if chi[a] - clo[a] <= 0.0:
+                    continue
+                # Suffix sweep: area and count right of each boundary.
+                for c in range(3):
+                    acc_lo[c] = np.inf
+                    acc_hi[c] = -np.inf
+                acc_n = 0
+                for b in range(n_bins - 1, 0, -1):
+                    acc_n += bin_n[a, b]
+                    for c in range(3):
+                        acc_lo[c] = min(acc_lo[c], bin_lo[a, b, c])
+                        acc_hi[c] = max(acc_hi[c], bin_hi[a, b, c])
+                    right_n[b] = acc_n
+                    right_area[b] = _area(acc_lo, acc_hi) if acc_n > 0 else 0.0
+                # Prefix sweep; boundary b splits bins < b from bins >= b.
+                for c in range(3):
+                    acc_lo[c] = np.inf
+                    acc_hi[c] = -np.inf
+                acc_n = 0
+                for b in range(1, n_bins):
+                    acc_n += bin_n[a, b - 1]
+                    for c in range(3):
+                        acc_lo[c] = min(acc_lo[c], bin_lo[a, b - 1, c])
+                        acc_hi[c] = max(acc_hi[c], bin_hi[a, b - 1, c])
+                    if acc_n == 0 or right_n[b] == 0:
+                        continue
+                    cost = acc_n * _area(acc_lo, acc_hi) + right_n[b] * right_area[b]
+                    if cost < best_cost:
+                        best_cost = cost
+                        best_axis = a
+                        best_bin = b
+        split_cost = np.inf
+        if best_axis >= 0:
+            split_cost = C_TRAVERSAL + C_INTERSECT * best_cost / max(parent_area, 1e-300)
+        leaf_cost = C_INTERSECT * count
+        make_leaf = count < min_leaf_split or depth >= MAX_DEPTH or (
+            leaf_cost <= split_cost and count <= max_leaf)
+        mid = start
+        if not make_leaf:
+            if best_axis >= 0:
+                # Partition in place: bins < best_bin go left.
+                a = best_axis
+                scale = n_bins / (chi[a] - clo[a])
+                i = start
+                j = end - 1
+                while i <= j:
+                    b = min(int((centroid[order[i], a] - clo[a]) * scale), n_bins - 1)
+                    if b < best_bin:
+                        i += 1
+                    else:
+                        tmp = order[i]
+                        order[i] = order[j]
+                        order[j] = tmp
+                        j -= 1
+                mid = i
+            else:
+                # All centroids coincide: no spatial split exists; halve the range so the
+                # leaves stay small (keeps the worst case bounded for degenerate input).
+                mid = start + count // 2
+        # Where this range's node lives: the root is node 0; others fill a parent slot.
+        if parent < 0:
+            node = 0
+            if make_leaf:
+                # A whole scene in one leaf: root with one leaf child and one empty child.
+                for c in range(3):
+                    box[0, c] = lo[c]
+                    box[0, 3 + c] = hi[c]
+                child[0, 0] = start
+                child[0, 1] = count
+                child[0, 2] = 0
+                child[0, 3] = -1
+                continue
+        else:
+            for c in range(3):
+                box[parent, 6 * side + c] = lo[c]
+                box[parent, 6 * side + 3 + c] = hi[c]
+            if make_leaf:
+                child[parent, 2 * side] = start
+                child[parent, 2 * side + 1] = count
+                continue
+            node = n_nodes
+            n_nodes += 1
+            child[parent, 2 * side] = node
+            child[parent, 2 * side + 1] = 0
+        # Children tasks: right first so the left subtree is built (and laid out) first.
+        tasks[n_tasks, 0] = mid
+        tasks[n_tasks, 1] = end
+        tasks[n_tasks, 2] = node
+        tasks[n_tasks, 3] = 1
+        tasks[n_tasks, 4] = depth + 1
+        n_tasks += 1
+        tasks[n_tasks, 0] = start
+        tasks[n_tasks, 1] = mid
+        tasks[n_tasks, 2] = node
+        tasks[n_tasks, 3] = 0
+        tasks[n_tasks, 4] = depth + 1
+        n_tasks += 1
+    return box[:n_nodes].copy(), child[:n_nodes].copy(), order, n_nodes, max_depth
+
+
+def build_bvh(tri_verts, n_bins=16, max_leaf=8):
+    """Build a BVH over triangles ``tri_verts`` (float32, N x 3 x 3).
+
+    Returns a :class:`BVH`; reorder the triangle arrays with ``bvh.order`` before use.
+    """
+    tri_verts = np.ascontiguousarray(tri_verts, dtype=np.float32)
+    tri_lo = tri_verts.min(axis=1)
+    tri_hi = tri_verts.max(axis=1)
+    centroid = 0.5 * (tri_lo.astype(np.float64) + tri_hi.astype(np.float64))
+    box, child, order, _, depth = _build(tri_lo, tri_hi, centroid, int(n_bins), int(max_leaf), 2)
+    return BVH(box, child, order, int(depth))
+
+
+def sah_cost(bvh):
+    """SAH cost of the tree (C_trav per inner node visit, C_int per triangle test),
+    normalised by the root's surface area: the expected cost of a random ray."""
+    box = bvh.box.astype(np.float64)
+    child = bvh.child
+
+    def area(b):
+        d = np.maximum(b[3:6] - b[0:3], 0.0)
+        return 2.0 * (d[0] * d[1] + d[1] * d[2] + d[2] * d[0])
+
+    root_lo = np.minimum(box[0, 0:3], box[0, 6:9])
+    root_hi = np.maximum(box[0, 3:6], box[0, 9:12])
+    if child[0, 3] < 0:
+        root_lo, root_hi = box[0, 0:3], box[0, 3:6]
+    root_area = area(np.concatenate([root_lo, root_hi]))
+    if root_area <= 0:
+        return float("nan")
+    cost = C_TRAVERSAL  # the root is always visited
+    for k in range(box.shape[0]):
+        for side in range(2):
+            c, n = child[k, 2 * side], child[k, 2 * side + 1]
+            if n < 0:
+                continue
+            a = area(box[k, 6 * side:6 * side + 6]) / root_area
+            cost += a * (C_TRAVERSAL if n == 0 else C_INTERSECT * n)
+    return cost

@@ -1,0 +1,31 @@
+"""Backends: thin loops around the shared ``render_pixel`` device function.
+
+``cpu`` (``@njit(parallel=True)``, rows in parallel), ``cuda`` (one thread per pixel) and
+``python`` (the same code interpreted: slow, for debugging one pixel).
+"""
+
+
+def cuda_available():
+    try:
+        from numba import cuda
+        return bool(cuda.is_available())
+    except Exception:
+        return False
+
+
+def make_backend(name, scene, **options):
+    """Backend ``name`` ('auto', 'cpu', 'cuda' or 'python') for a compiled scene."""
+    if name == "auto":
+        name = "cuda" if cuda_available() else "cpu"
+    if name == "cpu":
+        from .cpu import CPUBackend
+        return CPUBackend(scene, **options)
+    if name == "cuda":
+        if not cuda_available():
+            raise RuntimeError("--backend cuda: no CUDA GPU is available (numba.cuda finds none)")
+        from .cuda import CUDABackend
+        return CUDABackend(scene, **options)
+    if name == "python":
+        from .python import PythonBackend
+        return PythonBackend(scene, **options)
+    raise ValueError(f"unknown backend {name!r}")

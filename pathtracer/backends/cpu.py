@@ -1,0 +1,44 @@
+"""CPU backend: ``@njit(parallel=True)`` over image rows, compiled code cached on disk."""
+import functools
+
+import numpy as np
+from numba import njit, prange
+
+from ..kernels.constants import STACK_SIZE
+from ..kernels.integrator import make_render_pixel
+
+
+@functools.lru_cache(maxsize=None)
+def pass_kernel(features):
+    render_pixel = make_render_pixel(features)
+
+    # error_model='numpy': float division by zero gives inf/nan as on the GPU, not an exception.
+    @njit(parallel=True, cache=True, error_model="numpy")
+    def render_pass(out, stats, sample_start, n_samples, seed, max_bounces, rr_depth, scene):
+        for py in prange(out.shape[0]):
+            stack = np.empty(STACK_SIZE, np.int32)   # BVH traversal scratch, one per row
+            for px in range(out.shape[1]):
+                render_pixel(px, py, sample_start, n_samples, seed, max_bounces, rr_depth,
+                             scene, stack, out, stats)
+
+    return render_pass
+
+
+class CPUBackend:
+    name = "cpu"
+
+    def __init__(self, scene):
+        self.scene = scene
+        self.kernel = pass_kernel(scene.features)
+        self.out = np.zeros((scene.height, scene.width, 3), np.float32)
+        self.stats = np.zeros((scene.height, scene.width, 3), np.int32)
+
+    def compile(self):
+        """Compile (or load from the disk cache) without rendering."""
+        self.render_pass(0, 0, 0, 0, 0)
+
+    def render_pass(self, sample_start, n_samples, seed, max_bounces, rr_depth):
+        """Sums over n_samples paths per pixel (float32 HxWx3) and ray/NaN counts (HxWx3)."""
+        self.kernel(self.out, self.stats, sample_start, n_samples, seed, max_bounces, rr_depth,
+                    self.scene.arrays)
+        return self.out, self.stats

@@ -1,0 +1,30 @@
+"""Interpreted backend: the kernel source run as plain Python (slow; for debugging)."""
+import numpy as np
+
+from ..kernels.constants import STACK_SIZE
+from ..kernels.integrator import make_render_pixel
+
+
+class PythonBackend:
+    name = "python"
+
+    def __init__(self, scene, pixels=None):
+        """``pixels``: optional list of (x, y) to render; other pixels stay black."""
+        self.scene = scene
+        self.render_pixel = make_render_pixel(scene.features)
+        self.pixels = pixels
+        self.out = np.zeros((scene.height, scene.width, 3), np.float32)
+        self.stats = np.zeros((scene.height, scene.width, 3), np.int32)
+
+    def compile(self):
+        pass
+
+    def render_pass(self, sample_start, n_samples, seed, max_bounces, rr_depth):
+        stack = np.empty(STACK_SIZE, np.int32)
+        pixels = self.pixels or [(x, y) for y in range(self.scene.height)
+                                 for x in range(self.scene.width)]
+        with np.errstate(all="ignore"):
+            for px, py in pixels:
+                self.render_pixel(px, py, sample_start, n_samples, seed, max_bounces, rr_depth,
+                                  self.scene.arrays, stack, self.out, self.stats)
+        return self.out, self.stats

@@ -1,0 +1,93 @@
+"""BVH traversal over the flat node arrays built by :mod:`pathtracer.accel.bvh`.
+
+Node k stores both children's boxes (Aila & Laine 2009 layout, so one node visit tests two
+boxes): ``bvh_box[k, 0:6]`` and ``bvh_box[k, 6:12]`` (min xyz, max xyz) and
+``bvh_child[k] = (c0, n0, c1, n1)``: a child with count n > 0 is a leaf over triangles
+c .. c+n-1, with n == 0 an inner node with index c, and with n < 0 empty. Node 0 is the root.
+"""
+from .constants import INF, ZERO
+from .device import device
+from .intersect import ray_box, ray_triangle, safe_inverse
+
+
+@device
+def _intersect_leaf(o, d, tri_v, first, count, skip, t_best, tri_best, b1_best, b2_best):
+    for i in range(first, first + count):
+        if i != skip:
+            t, b1, b2 = ray_triangle(o, d, tri_v, i, t_best)
+            if t < t_best:
+                t_best = t
+                tri_best = i
+                b1_best = b1
+                b2_best = b2
+    return t_best, tri_best, b1_best, b2_best
+
+
+@device
+def closest_hit(o, d, t_max, skip, tri_v, bvh_box, bvh_child, stack):
+    """Nearest hit (t, tri, b1, b2) with 0 < t < t_max, ignoring triangle ``skip``; tri = -1
+    on a miss. ``stack`` is int32 scratch of STACK_SIZE entries owned by the caller."""
+    inv_d = safe_inverse(d)
+    t_best = t_max
+    tri_best = -1
+    b1_best = ZERO
+    b2_best = ZERO
+    stack[0] = 0
+    sp = 1
+    while sp > 0:
+        sp -= 1
+        node = stack[sp]
+        c0 = bvh_child[node, 0]
+        n0 = bvh_child[node, 1]
+        c1 = bvh_child[node, 2]
+        n1 = bvh_child[node, 3]
+        t0 = ray_box(o, inv_d, bvh_box, node, 0, t_best) if n0 >= 0 else INF
+        t1 = ray_box(o, inv_d, bvh_box, node, 6, t_best) if n1 >= 0 else INF
+        # Nearer child first: swap so that child 0 is the nearer one.
+        if t1 < t0:
+            c0, c1 = c1, c0
+            n0, n1 = n1, n0
+            t0, t1 = t1, t0
+        # Inner children go on the stack, far one below the near one.
+        if t1 < INF and n1 == 0:
+            stack[sp] = c1
+            sp += 1
+        if t0 < INF and n0 == 0:
+            stack[sp] = c0
+            sp += 1
+        # Leaf children are intersected at once; the far leaf only if still in front.
+        if t0 < INF and n0 > 0:
+            t_best, tri_best, b1_best, b2_best = _intersect_leaf(
+                o, d, tri_v, c0, n0, skip, t_best, tri_best, b1_best, b2_best)
+        if t1 < t_best and n1 > 0:
+            t_best, tri_best, b1_best, b2_best = _intersect_leaf(
+                o, d, tri_v, c1, n1, skip, t_best, tri_best, b1_best, b2_best)
+    if tri_best < 0:
+        return INF, -1, ZERO, ZERO
+    return t_best, tri_best, b1_best, b2_best
+
+
+@device
+def any_hit(o, d, t_max, skip_a, skip_b, tri_v, bvh_box, bvh_child, stack):
+    """True if any triangle other than skip_a and skip_b is hit with 0 < t < t_max
+    (shadow rays: the shading point's and the light sample's triangles are skipped)."""
+    inv_d = safe_inverse(d)
+    stack[0] = 0
+    sp = 1
+    while sp > 0:
+        sp -= 1
+        node = stack[sp]
+        for side in range(2):
+            c = bvh_child[node, 2 * side]
+            n = bvh_child[node, 2 * side + 1]
+            if n >= 0 and ray_box(o, inv_d, bvh_box, node, 6 * side, t_max) < INF:
+                if n == 0:
+                    stack[sp] = c
+                    sp += 1
+                else:
+                    for i in range(c, c + n):
+                        if i != skip_a and i != skip_b:
+                            t, b1, b2 = ray_triangle(o, d, tri_v, i, t_max)
+                            if t < INF:
+                                return True
+    return False

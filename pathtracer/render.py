@@ -1,0 +1,96 @@
+"""Progressive rendering: passes of growing size accumulated into a float64 film."""
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Film:
+    height: int
+    width: int
+    sum: np.ndarray = None
+    spp: int = 0
+    bounce_rays: int = 0
+    shadow_rays: int = 0
+    nonfinite: int = 0
+
+    def __post_init__(self):
+        self.sum = np.zeros((self.height, self.width, 3), np.float64)
+
+    def add(self, pass_sum, stats, n_samples):
+        self.sum += pass_sum
+        self.spp += n_samples
+        totals = stats.reshape(-1, 3).sum(axis=0, dtype=np.int64)
+        self.bounce_rays += int(totals[0])
+        self.shadow_rays += int(totals[1])
+        self.nonfinite += int(totals[2])
+
+    def image(self):
+        return (self.sum / max(self.spp, 1)).astype(np.float32)
+
+    @property
+    def camera_rays(self):
+        return self.spp * self.width * self.height
+
+
+@dataclass
+class RenderResult:
+    film: Film
+    seconds: float           # rendering time, compile excluded
+    compile_seconds: float
+    interrupted: bool = False
+    passes: list = field(default_factory=list)   # (elapsed s, spp) after each pass
+
+
+def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=None,
+           rr_depth=None, pass_seconds=0.5, on_pass=None):
+    """Render ``scene`` with ``backend`` until ``spp`` samples per pixel or ``time_limit``
+    seconds, whichever comes first (spp defaults to the scene's unless a time is given).
+
+    Pass sizes start at 1 spp and double while a pass is shorter than ``pass_seconds``, so
+    the image refreshes quickly at first and overhead stays small later. ``on_pass(film,
+    elapsed)`` is called after every pass. Ctrl-C stops after the current pass and returns
+    the samples done so far (``interrupted`` is set).
+    """
+    seed = scene.seed if seed is None else seed
+    max_bounces = scene.max_bounces if max_bounces is None else max_bounces
+    rr_depth = scene.rr_depth if rr_depth is None else rr_depth
+    if spp is None and time_limit is None:
+        spp = scene.spp
+    film = Film(scene.height, scene.width)
+    t0 = time.perf_counter()
+    backend.compile()
+    compile_seconds = time.perf_counter() - t0
+    result = RenderResult(film, 0.0, compile_seconds)
+    n = 1
+    start = time.perf_counter()
+    try:
+        while True:
+            elapsed = time.perf_counter() - start
+            if spp is not None and film.spp >= spp:
+                break
+            if time_limit is not None and elapsed >= time_limit:
+                break
+            if spp is not None:
+                n = min(n, spp - film.spp)
+            t_pass = time.perf_counter()
+            pass_sum, stats = backend.render_pass(film.spp, n, seed, max_bounces, rr_depth)
+            film.add(pass_sum, stats, n)
+            dt = time.perf_counter() - t_pass
+            elapsed = time.perf_counter() - start
+            result.passes.append((elapsed, film.spp))
+            if on_pass is not None:
+                on_pass(film, elapsed)
+            # Grow the pass while it is short; aim the last pass at the time limit.
+            if dt < pass_seconds:
+                n *= 2
+            elif dt > 2 * pass_seconds and n > 1:
+                n //= 2
+            if time_limit is not None and dt > 0:
+                left = time_limit - elapsed
+                n = max(1, min(n, int(left / (dt / n)))) if left > 0 else n
+    except KeyboardInterrupt:
+        result.interrupted = True
+    result.seconds = time.perf_counter() - start
+    return result

@@ -1,0 +1,501 @@
+"""Read and validate a scene file (the contract: ``docs/scene-format.md``).
+
+Every value is checked as it is read, and every error names the file and the JSON path
+(``/materials/2/albedo``). Unknown keys are errors (pbrt's ReportUnused, Mitsuba's queried
+bit): nothing in a scene is silently ignored. Keys of the contract whose feature is not
+built yet raise a "not supported yet" error rather than rendering a different image.
+"""
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+from .errors import SceneError
+
+NOT_YET = "is not supported yet (planned: principled BSDF, textures, HDRI, thin lens)"
+
+
+# ---------------------------------------------------------------------------------------
+# Description: what the file says, validated, with defaults filled in.
+
+@dataclass
+class Camera:
+    resolution: tuple = (640, 360)
+    position: tuple = (0.0, 0.0, 0.0)
+    look_at: Optional[tuple] = None
+    up: tuple = (0.0, 1.0, 0.0)
+    rotation: tuple = (0.0, 0.0, 0.0)
+    fov: float = 39.6                   # horizontal, degrees
+    aperture: float = 0.0
+    focus_distance: float = 1.0
+
+
+@dataclass
+class RenderSettings:
+    spp: int = 64
+    max_bounces: int = 8
+    rr_depth: int = 5
+    seed: int = 0
+
+
+@dataclass
+class Material:
+    name: str
+    type: str = "diffuse"
+    albedo: tuple = (0.5, 0.5, 0.5)
+    emission: tuple = (0.0, 0.0, 0.0)
+    two_sided: bool = False
+    pointer: str = ""
+
+
+@dataclass
+class Object:
+    name: str
+    file: Optional[str] = None
+    vertices: Optional[np.ndarray] = None   # float64 (V, 3), inline meshes
+    faces: Optional[np.ndarray] = None      # int64 (F, 3), inline meshes
+    material: Optional[str] = None
+    matrix: np.ndarray = field(default_factory=lambda: np.eye(4))
+    smooth: bool = False
+    pointer: str = ""
+
+
+@dataclass
+class PointLight:
+    position: tuple
+    intensity: tuple
+
+
+@dataclass
+class SceneDescription:
+    path: str
+    camera: Camera
+    render: RenderSettings
+    materials: dict            # name -> Material
+    objects: list
+    point_lights: list
+    environment: Optional[tuple] = None   # constant radiance rgb, or None (black)
+
+
+# ---------------------------------------------------------------------------------------
+# Typed access to JSON values with paths.
+
+class Node:
+    """A JSON object being read: typed getters, and an error for any key left unread."""
+
+    def __init__(self, value, pointer, file):
+        if not isinstance(value, dict):
+            raise SceneError(f"expected an object, got {_kind(value)}", file, pointer or "/")
+        self.value = value
+        self.pointer = pointer
+        self.file = file
+        self.read = set()
+
+    def error(self, message, key=None):
+        return SceneError(message, self.file, self.path(key) if key is not None else
+                          (self.pointer or "/"))
+
+    def path(self, key):
+        return f"{self.pointer}/{key}"
+
+    def has(self, key):
+        return key in self.value
+
+    def raw(self, key, default=None):
+        self.read.add(key)
+        return self.value.get(key, default)
+
+    def number(self, key, default=None, lo=None, hi=None, lo_open=False):
+        if key not in self.value:
+            return default
+        v = _number(self.raw(key), self.file, self.path(key))
+        _check_range(v, lo, hi, lo_open, self.file, self.path(key))
+        return v
+
+    def integer(self, key, default=None, lo=None, hi=None):
+        if key not in self.value:
+            return default
+        v = self.raw(key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or (
+                isinstance(v, float) and not v.is_integer()):
+            raise SceneError(f"expected an integer, got {_kind(v)}", self.file, self.path(key))
+        v = int(v)
+        _check_range(v, lo, hi, False, self.file, self.path(key))
+        return v
+
+    def boolean(self, key, default=None):
+        if key not in self.value:
+            return default
+        v = self.raw(key)
+        if not isinstance(v, bool):
+            raise SceneError(f"expected true or false, got {_kind(v)}", self.file, self.path(key))
+        return v
+
+    def string(self, key, default=None, choices=None):
+        if key not in self.value:
+            return default
+        v = self.raw(key)
+        if not isinstance(v, str):
+            raise SceneError(f"expected a string, got {_kind(v)}", self.file, self.path(key))
+        if choices is not None and v not in choices:
+            raise SceneError(f"expected one of {', '.join(map(repr, choices))}, got {v!r}",
+                             self.file, self.path(key))
+        return v
+
+    def vector(self, key, default=None):
+        if key not in self.value:
+            return default
+        return _triple(self.raw(key), self.file, self.path(key), ("x", "y", "z"), False)
+
+    def color(self, key, default=None):
+        """Linear RGB, >= 0: [r, g, b], a number (grey), {r, g, b} or {x, y, z}."""
+        if key not in self.value:
+            return default
+        v = self.raw(key)
+        if isinstance(v, (str, dict)) and (isinstance(v, str) or "texture" in v):
+            raise SceneError(f"textures {NOT_YET}", self.file, self.path(key))
+        c = _triple(v, self.file, self.path(key), None, True)
+        for i, x in enumerate(c):
+            if x < 0:
+                raise SceneError(f"colour components must be >= 0, got {x}", self.file,
+                                 self.path(key))
+        return c
+
+    def node(self, key):
+        return Node(self.raw(key), self.path(key), self.file)
+
+    def items(self, key):
+        v = self.raw(key, [])
+        if not isinstance(v, list):
+            raise SceneError(f"expected a list, got {_kind(v)}", self.file, self.path(key))
+        return v
+
+    def finish(self):
+        unknown = [k for k in self.value if k not in self.read]
+        if unknown:
+            raise SceneError(f"unknown key {unknown[0]!r}", self.file, self.path(unknown[0]))
+
+
+def _kind(v):
+    if v is None:
+        return "null"
+    if isinstance(v, bool):
+        return "a boolean"
+    if isinstance(v, (int, float)):
+        return f"the number {v}"
+    if isinstance(v, str):
+        return f"the string {v!r}"
+    if isinstance(v, list):
+        return "a list"
+    return "an object"
+
+
+def _number(v, file, pointer):
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise SceneError(f"expected a number, got {_kind(v)}", file, pointer)
+    v = float(v)
+    if not math.isfinite(v):
+        raise SceneError(f"expected a finite number, got {v}", file, pointer)
+    return v
+
+
+def _check_range(v, lo, hi, lo_open, file, pointer):
+    if lo is not None and (v < lo or (lo_open and v == lo)):
+        raise SceneError(f"must be {'>' if lo_open else '>='} {lo}, got {v}", file, pointer)
+    if hi is not None and v > hi:
+        raise SceneError(f"must be <= {hi}, got {v}", file, pointer)
+
+
+def _triple(v, file, pointer, names, allow_scalar):
+    if allow_scalar and isinstance(v, (int, float)) and not isinstance(v, bool):
+        x = _number(v, file, pointer)
+        return (x, x, x)
+    if isinstance(v, list):
+        if len(v) != 3:
+            raise SceneError(f"expected 3 numbers, got {len(v)}", file, pointer)
+        return tuple(_number(x, file, f"{pointer}/{i}") for i, x in enumerate(v))
+    if isinstance(v, dict):
+        for keys in ((("r", "g", "b"), ("x", "y", "z")) if names is None else (names,)):
+            if set(v) == set(keys):
+                return tuple(_number(v[k], file, f"{pointer}/{k}") for k in keys)
+        want = "{r, g, b} or {x, y, z}" if names is None else "{x, y, z}"
+        raise SceneError(f"expected an object with keys {want}, got keys {sorted(v)}", file,
+                         pointer)
+    what = "a colour" if names is None else "a vector [x, y, z]"
+    raise SceneError(f"expected {what}, got {_kind(v)}", file, pointer)
+
+
+# ---------------------------------------------------------------------------------------
+# Parsing.
+
+def _strict_json(path):
+    def no_constant(name):
+        raise ValueError(f"{name} is not valid JSON")
+
+    def no_duplicates(pairs):
+        d = {}
+        for k, v in pairs:
+            if k in d:
+                raise ValueError(f"duplicate key {k!r}")
+            d[k] = v
+        return d
+
+    try:
+        with open(path, "r", encoding="utf-8") as f:
+            text = f.read()
+    except FileNotFoundError:
+        raise SceneError("scene file not found", path) from None
+    except IsADirectoryError:
+        raise SceneError("is a folder: thesis-style scene folders " + NOT_YET, path) from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise SceneError(f"cannot read: {e}", path) from None
+    try:
+        return json.loads(text, parse_constant=no_constant, object_pairs_hook=no_duplicates)
+    except json.JSONDecodeError as e:
+        raise SceneError(f"invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}",
+                         path) from None
+    except ValueError as e:
+        raise SceneError(f"invalid JSON: {e}", path) from None
+
+
+def load_scene_description(path):
+    """Parse and validate ``path``; raises :class:`SceneError` on any bad input."""
+    path = os.path.abspath(path)
+    root = Node(_strict_json(path), "", path)
+    base = os.path.dirname(path)
+    if not root.has("camera"):
+        raise root.error("missing required key 'camera'")
+    camera = _camera(root.node("camera"))
+    render = _render(root.node("render")) if root.has("render") else RenderSettings()
+    materials = {}
+    for i, m in enumerate(root.items("materials")):
+        mat = _material(Node(m, f"/materials/{i}", path))
+        if mat.name in materials:
+            raise SceneError(f"duplicate material name {mat.name!r}", path, f"/materials/{i}/name")
+        materials[mat.name] = mat
+    objects = [_object(Node(o, f"/objects/{i}", path), base, materials)
+               for i, o in enumerate(root.items("objects"))]
+    names = set()
+    for o in objects:
+        if o.name in names:
+            raise SceneError(f"duplicate object name {o.name!r}", path, f"{o.pointer}/name")
+        names.add(o.name)
+    lights = [_point_light(Node(v, f"/lights/{i}", path))
+              for i, v in enumerate(root.items("lights"))]
+    for i, v in enumerate(root.items("pointLights")):   # thesis alias
+        n = Node(v, f"/pointLights/{i}", path)
+        pos = n.vector("position", (0.0, 0.0, 0.0))
+        lights.append(PointLight(pos, n.color("radiance", (1.0, 1.0, 1.0))))
+        n.finish()
+    environment = None
+    if root.has("environment"):
+        environment = _environment(root.node("environment"))
+    if root.has("hdri"):                                # thesis alias
+        if root.has("environment"):
+            raise root.error("give 'environment' or 'hdri', not both", "hdri")
+        environment = _environment(root.node("hdri"), thesis=True)
+    root.finish()
+    return SceneDescription(path, camera, render, materials, objects, lights, environment)
+
+
+def _camera(n):
+    cam = Camera()
+    if n.has("resolution"):
+        if n.has("xRes") or n.has("yRes"):
+            raise n.error("give 'resolution' or 'xRes'/'yRes', not both", "resolution")
+        v = n.raw("resolution")
+        if not isinstance(v, list) or len(v) != 2:
+            raise n.error("expected [width, height]", "resolution")
+        cam.resolution = tuple(_positive_int(x, n.file, f"{n.path('resolution')}/{i}")
+                               for i, x in enumerate(v))
+    else:
+        cam.resolution = (n.integer("xRes", cam.resolution[0], lo=1),
+                          n.integer("yRes", cam.resolution[1], lo=1))
+    cam.position = n.vector("position", cam.position)
+    cam.look_at = n.vector("lookAt", None)
+    cam.up = n.vector("up", cam.up)
+    cam.rotation = n.vector("rotation", cam.rotation)
+    if n.has("lookAt") and n.has("rotation"):
+        raise n.error("give 'lookAt' or 'rotation', not both", "rotation")
+    if cam.look_at is not None:
+        fwd = np.subtract(cam.look_at, cam.position)
+        if np.linalg.norm(fwd) == 0:
+            raise n.error("lookAt equals position", "lookAt")
+        if np.linalg.norm(np.cross(fwd, cam.up)) <= 1e-12 * np.linalg.norm(fwd) * max(
+                np.linalg.norm(cam.up), 1e-300):
+            raise n.error("up is parallel to the viewing direction (or zero)", "up")
+    sensor_width = n.number("sensorWidth", 0.036, lo=0, lo_open=True)
+    if n.has("focalLength"):
+        if n.has("fov"):
+            raise n.error("give 'fov' or 'focalLength', not both", "focalLength")
+        focal = n.number("focalLength", lo=0, lo_open=True)
+        cam.fov = math.degrees(2 * math.atan(sensor_width / (2 * focal)))
+    else:
+        cam.fov = n.number("fov", cam.fov, lo=0, lo_open=True)
+        if cam.fov >= 180:
+            raise n.error(f"must be < 180 degrees, got {cam.fov}", "fov")
+    cam.aperture = n.number("aperture", 0.0, lo=0)
+    cam.focus_distance = n.number("focusDistance", 1.0, lo=0, lo_open=True)
+    if cam.aperture > 0:
+        raise n.error(f"the thin-lens camera (aperture > 0) {NOT_YET}", "aperture")
+    n.finish()
+    return cam
+
+
+def _positive_int(v, file, pointer):
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or (
+            isinstance(v, float) and not v.is_integer()) or v < 1:
+        raise SceneError(f"expected a positive integer, got {_kind(v)}", file, pointer)
+    return int(v)
+
+
+def _render(n):
+    r = RenderSettings(
+        spp=n.integer("spp", 64, lo=1),
+        max_bounces=n.integer("maxBounces", 8, lo=0, hi=1000),
+        rr_depth=n.integer("rrDepth", 5, lo=0),
+        seed=n.integer("seed", 0, lo=0, hi=2**32 - 1))
+    n.finish()
+    return r
+
+
+def _material(n):
+    name = n.string("name")
+    if name is None:
+        raise n.error("missing required key 'name'")
+    mtype = n.string("type", "principled", choices=("principled", "diffuse"))
+    if mtype == "principled":
+        raise n.error(f"material type 'principled' (the default type) {NOT_YET}; "
+                      "use \"type\": \"diffuse\" for now", "type" if n.has("type") else None)
+    if n.has("albedo") and n.has("baseColor"):
+        raise n.error("give 'albedo' or 'baseColor', not both", "baseColor")
+    albedo = n.color("albedo", None)
+    if albedo is None:
+        albedo = n.color("baseColor", (0.5, 0.5, 0.5))
+    m = Material(name=name, type=mtype, albedo=albedo,
+                 emission=n.color("emission", (0.0, 0.0, 0.0)),
+                 two_sided=n.boolean("twoSided", False), pointer=n.pointer)
+    n.finish()
+    return m
+
+
+def _object(n, base, materials):
+    name = n.string("name")
+    if name is None:
+        raise n.error("missing required key 'name'")
+    obj = Object(name=name, pointer=n.pointer)
+    if n.has("file"):
+        if n.has("vertices") or n.has("faces"):
+            raise n.error("give 'file' or inline 'vertices'/'faces', not both", "file")
+        obj.file = os.path.join(base, n.string("file"))
+        if not os.path.isfile(obj.file):
+            raise n.error(f"file not found: {obj.file}", "file")
+    elif n.has("vertices") and n.has("faces"):
+        obj.vertices = _array(n, "vertices", float, 3)
+        obj.faces = _array(n, "faces", int, 3)
+        nv = len(obj.vertices)
+        bad = np.argwhere((obj.faces < 0) | (obj.faces >= nv))
+        if len(bad):
+            i, j = bad[0]
+            raise SceneError(f"vertex index {obj.faces[i, j]} out of range (0..{nv - 1})",
+                             n.file, f"{n.path('faces')}/{i}/{j}")
+    else:
+        raise n.error("needs 'file', or 'vertices' and 'faces'")
+    obj.material = n.string("material", None)
+    if obj.material is not None and obj.material not in materials:
+        raise n.error(f"unknown material {obj.material!r}", "material")
+    if n.has("transform"):
+        obj.matrix = _transform(n.node("transform"))
+    obj.smooth = n.boolean("smooth", False)
+    n.finish()
+    return obj
+
+
+def _array(n, key, kind, width):
+    v = n.raw(key)
+    where = n.path(key)
+    if not isinstance(v, list):
+        raise SceneError(f"expected a list, got {_kind(v)}", n.file, where)
+    out = np.empty((len(v), width), dtype=np.float64 if kind is float else np.int64)
+    for i, row in enumerate(v):
+        if not isinstance(row, list) or len(row) != width:
+            raise SceneError(f"expected a list of {width} numbers", n.file, f"{where}/{i}")
+        for j, x in enumerate(row):
+            p = f"{where}/{i}/{j}"
+            if kind is float:
+                out[i, j] = _number(x, n.file, p)
+            else:
+                if isinstance(x, bool) or not isinstance(x, int):
+                    raise SceneError(f"expected an integer index, got {_kind(x)}", n.file, p)
+                out[i, j] = x
+    return out
+
+
+def euler_matrix(degrees):
+    """Rotation about X, then Y, then Z (right-handed, degrees): Rz @ Ry @ Rx."""
+    ax, ay, az = np.radians(degrees)
+    cx, sx, cy, sy, cz, sz = (np.cos(ax), np.sin(ax), np.cos(ay), np.sin(ay), np.cos(az),
+                              np.sin(az))
+    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def _transform(n):
+    if n.has("matrix"):
+        for k in ("translate", "rotate", "scale"):
+            if n.has(k):
+                raise n.error("give 'matrix' or translate/rotate/scale, not both", k)
+        v = n.raw("matrix")
+        rows = v if isinstance(v, list) else None
+        if rows is None or len(rows) != 4 or any(not isinstance(r, list) or len(r) != 4
+                                                 for r in rows):
+            raise n.error("expected a 4x4 row-major matrix (4 lists of 4 numbers)", "matrix")
+        m = np.array([[_number(x, n.file, f"{n.path('matrix')}/{i}/{j}")
+                       for j, x in enumerate(r)] for i, r in enumerate(rows)])
+        if not np.allclose(m[3], [0, 0, 0, 1]):
+            raise n.error("the last row must be [0, 0, 0, 1] (affine transforms only)", "matrix")
+    else:
+        s = n.raw("scale", 1.0) if n.has("scale") else 1.0
+        if isinstance(s, (int, float)) and not isinstance(s, bool):
+            sv = (_number(s, n.file, n.path("scale")),) * 3
+        else:
+            sv = _triple(s, n.file, n.path("scale"), ("x", "y", "z"), False)
+        m = np.eye(4)
+        m[:3, :3] = euler_matrix(n.vector("rotate", (0.0, 0.0, 0.0))) @ np.diag(sv)
+        m[:3, 3] = n.vector("translate", (0.0, 0.0, 0.0))
+    if abs(np.linalg.det(m[:3, :3])) < 1e-300:
+        raise n.error("the transform is singular (zero scale)")
+    n.finish()
+    return m
+
+
+def _point_light(n):
+    n.string("type", "point", choices=("point",))
+    if not n.has("position"):
+        raise n.error("missing required key 'position'")
+    light = PointLight(n.vector("position"), n.color("intensity", (1.0, 1.0, 1.0)))
+    n.finish()
+    return light
+
+
+def _environment(n, thesis=False):
+    file_key = "name" if thesis else "file"
+    if n.has(file_key):
+        raise n.error(f"environment maps (HDRI files) {NOT_YET}", file_key)
+    if thesis:
+        for k in ("xOffset", "yOffset"):
+            n.number(k, 0.0)
+    else:
+        if n.has("rotation"):
+            n.number("rotation")
+    if not n.has("color"):
+        raise n.error(f"needs 'color' (or '{file_key}')")
+    color = n.color("color")
+    intensity = n.number("intensity", 1.0, lo=0)
+    n.finish()
+    return tuple(c * intensity for c in color)

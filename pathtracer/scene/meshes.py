@@ -1,0 +1,151 @@
+"""OBJ meshes, read with pywavefront and cached on disk keyed by file content.
+
+A cached mesh is an ``.npz`` of unindexed triangles (positions, optional normals) and a
+per-face material index, with the .mtl material table beside it as JSON. The key is the
+SHA-256 of the OBJ bytes and of every .mtl it names, plus a format version, so an edited
+file is re-read and a renamed one is not.
+"""
+import hashlib
+import json
+import logging
+import os
+import re
+import tempfile
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from .errors import SceneError
+
+CACHE_VERSION = 2
+
+
+@dataclass
+class ObjMesh:
+    positions: np.ndarray          # float32 (F, 3, 3)
+    normals: Optional[np.ndarray]  # float32 (F, 3, 3) from `vn`, or None
+    face_material: np.ndarray      # int32 (F,): index into materials, -1 = no material
+    materials: list                # dicts: name, Kd, Ke, Ks, Ns, Ni, map_Kd, map_Bump
+    from_cache: bool = False
+
+
+def cache_dir():
+    d = os.environ.get("PT_RENDER_CACHE")
+    if not d:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        d = os.path.join(base, "pt-render")
+    return os.path.join(d, "meshes")
+
+
+def _cache_key(path, data):
+    h = hashlib.sha256()
+    h.update(f"v{CACHE_VERSION}".encode())
+    h.update(data)
+    # The .mtl files change the material table: hash them too.
+    for m in re.findall(rb"^[ \t]*mtllib[ \t]+(.+?)[ \t]*$", data, re.M):
+        mtl = os.path.join(os.path.dirname(path), m.decode("utf-8", "replace"))
+        h.update(m)
+        if os.path.isfile(mtl):
+            with open(mtl, "rb") as f:
+                h.update(f.read())
+    return h.hexdigest()
+
+
+def load_obj(path, use_cache=True):
+    """Triangles and materials of the OBJ at ``path``; raises SceneError naming the file."""
+    try:
+        with open(path, "rb") as f:
+            data = f.read()
+    except OSError as e:
+        raise SceneError(f"cannot read: {e.strerror}", path) from None
+    key = _cache_key(path, data)
+    cpath = os.path.join(cache_dir(), key + ".npz")
+    if use_cache and os.path.isfile(cpath):
+        try:
+            return _read_cache(cpath)
+        except Exception:   # a damaged cache entry is re-made, never trusted
+            pass
+    mesh = _parse(path)
+    if use_cache:
+        _write_cache(cpath, mesh)
+    return mesh
+
+
+def _read_cache(cpath):
+    with np.load(cpath, allow_pickle=False) as z:
+        normals = z["normals"] if z["has_normals"] else None
+        return ObjMesh(z["positions"], normals, z["face_material"],
+                       json.loads(str(z["materials"])), from_cache=True)
+
+
+def _write_cache(cpath, mesh):
+    try:
+        os.makedirs(os.path.dirname(cpath), exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=os.path.dirname(cpath), suffix=".tmp.npz")
+        with os.fdopen(fd, "wb") as f:
+            np.savez(f, positions=mesh.positions,
+                     normals=mesh.normals if mesh.normals is not None else np.zeros((0, 3, 3),
+                                                                                    np.float32),
+                     has_normals=mesh.normals is not None, face_material=mesh.face_material,
+                     materials=json.dumps(mesh.materials))
+        os.replace(tmp, cpath)
+    except OSError as e:   # a read-only cache folder only costs speed
+        logging.getLogger("pt-render").warning("mesh cache not written (%s)", e)
+
+
+def _parse(path):
+    import pywavefront
+    logging.getLogger("pywavefront").setLevel(logging.ERROR)
+    try:
+        scene = pywavefront.Wavefront(path, collect_faces=True, create_materials=True,
+                                      parse=True)
+    except IndexError:
+        raise SceneError("a face refers to a vertex, normal or texture coordinate index "
+                         "that is out of range", path) from None
+    except FileNotFoundError as e:
+        raise SceneError(f"file not found: {e.filename or e}", path) from None
+    except Exception as e:   # pywavefront reports malformed lines with various types
+        raise SceneError(f"invalid OBJ: {e}", path) from None
+    for m in scene.mesh_list:
+        if m.faces and min(min(f) for f in m.faces) < 0:
+            raise SceneError("a face refers to a vertex index that is out of range", path)
+    positions, normals, face_mat, materials = [], [], [], []
+    all_have_normals = True
+    for mat in scene.materials.values():
+        if not mat.vertices:
+            continue
+        fmt = mat.vertex_format.split("_")
+        sizes = {"T2F": 2, "C3F": 3, "N3F": 3, "V3F": 3}
+        offsets, stride = {}, 0
+        for part in fmt:
+            offsets[part] = stride
+            stride += sizes[part]
+        v = np.asarray(mat.vertices, dtype=np.float32).reshape(-1, stride)
+        if len(v) % 3:
+            raise SceneError("incomplete face data", path)
+        o = offsets["V3F"]
+        positions.append(v[:, o:o + 3].reshape(-1, 3, 3))
+        if "N3F" in offsets:
+            o = offsets["N3F"]
+            normals.append(v[:, o:o + 3].reshape(-1, 3, 3))
+        else:
+            all_have_normals = False
+        # pywavefront names faces without `usemtl` "default<N>"; those get no material.
+        index = -1 if (mat.is_default and re.fullmatch(r"default\d+", mat.name)) else len(materials)
+        if index >= 0:
+            if mat.is_default:
+                raise SceneError(f"usemtl {mat.name!r}: no such material in the .mtl file(s)",
+                                 path)
+            materials.append({
+                "name": mat.name, "Kd": list(mat.diffuse[:3]), "Ke": list(mat.emissive[:3]),
+                "Ks": list(mat.specular[:3]), "Ns": float(mat.shininess),
+                "Ni": float(mat.optical_density),
+                "map_Kd": mat.texture.path if mat.texture else None,
+                "map_Bump": mat.texture_bump.path if mat.texture_bump else None})
+        face_mat.append(np.full(len(v) // 3, index, np.int32))
+    if not positions:
+        return ObjMesh(np.zeros((0, 3, 3), np.float32), None, np.zeros(0, np.int32), [])
+    return ObjMesh(np.concatenate(positions),
+                   np.concatenate(normals) if all_have_normals and normals else None,
+                   np.concatenate(face_mat), materials)
