@@ -1,6 +1,10 @@
 """pt-render: a physically based path tracer; one Numba kernel source for CPU and CUDA."""
-from .scene import SceneError, load_scene
-from .render import render
+from . import _jitcache
+
+_jitcache.configure()   # before any cached function is decorated (see _jitcache)
+
+from .scene import SceneError, load_scene  # noqa: E402
+from .render import render  # noqa: E402
 
 __version__ = "0.1.0"
 __all__ = ["SceneError", "load_scene", "render", "__version__"]

@@ -223,7 +223,20 @@ def build_bvh(tri_verts, n_bins=16, max_leaf=8):
     tri_hi = tri_verts.max(axis=1)
     centroid = 0.5 * (tri_lo.astype(np.float64) + tri_hi.astype(np.float64))
     box, child, order, _, depth = _build(tri_lo, tri_hi, centroid, int(n_bins), int(max_leaf), 2)
-    return BVH(box, child, order, int(depth))
+    return BVH(_widen(box), child, order, int(depth))
+
+
+def _widen(box):
+    """Push every bound two float32 ulps outward. A ray with a zero direction component
+    whose origin lies exactly on a box face would otherwise get the slab (0 * BIG = 0) and
+    miss the box; with widened boxes no triangle vertex lies on a face."""
+    out = box.copy()
+    for side in (0, 6):
+        for _ in range(2):
+            out[:, side:side + 3] = np.nextafter(out[:, side:side + 3], np.float32(-np.inf))
+            out[:, side + 3:side + 6] = np.nextafter(out[:, side + 3:side + 6],
+                                                     np.float32(np.inf))
+    return out
 
 
 def sah_cost(bvh):

@@ -5,7 +5,7 @@ boxes): ``bvh_box[k, 0:6]`` and ``bvh_box[k, 6:12]`` (min xyz, max xyz) and
 ``bvh_child[k] = (c0, n0, c1, n1)``: a child with count n > 0 is a leaf over triangles
 c .. c+n-1, with n == 0 an inner node with index c, and with n < 0 empty. Node 0 is the root.
 """
-from .constants import INF, ZERO
+from .constants import INF, SLAB_SCALE, ZERO
 from .device import device
 from .intersect import ray_box, ray_triangle, safe_inverse
 
@@ -55,11 +55,12 @@ def closest_hit(o, d, t_max, skip, tri_v, bvh_box, bvh_child, stack):
         if t0 < INF and n0 == 0:
             stack[sp] = c0
             sp += 1
-        # Leaf children are intersected at once; the far leaf only if still in front.
+        # Leaf children are intersected at once; the far leaf only if still in front (with
+        # the slab test's rounding slack: a flat box's entry may round past a nearer hit).
         if t0 < INF and n0 > 0:
             t_best, tri_best, b1_best, b2_best = _intersect_leaf(
                 o, d, tri_v, c0, n0, skip, t_best, tri_best, b1_best, b2_best)
-        if t1 < t_best and n1 > 0:
+        if t1 < INF and t1 <= t_best * SLAB_SCALE and n1 > 0:
             t_best, tri_best, b1_best, b2_best = _intersect_leaf(
                 o, d, tri_v, c1, n1, skip, t_best, tri_best, b1_best, b2_best)
     if tri_best < 0:

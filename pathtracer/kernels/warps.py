@@ -1,8 +1,34 @@
 """Warps from the unit square to other domains, with their densities (Mitsuba's naming)."""
 import math
 
-from .constants import INV_PI, ONE, PI_OVER_2, PI_OVER_4, TWO, ZERO
+from .constants import F32, INV_PI, ONE, PI_OVER_4, TWO, ZERO
 from .device import device
+
+
+# Taylor coefficients of sin and cos; on |x| <= pi/4 the truncation error is below 2e-9,
+# under float32 rounding.
+_S3 = F32(-1.0 / 6.0)
+_S5 = F32(1.0 / 120.0)
+_S7 = F32(-1.0 / 5040.0)
+_S9 = F32(1.0 / 362880.0)
+_C2 = F32(-0.5)
+_C4 = F32(1.0 / 24.0)
+_C6 = F32(-1.0 / 720.0)
+_C8 = F32(1.0 / 40320.0)
+_C10 = F32(-1.0 / 3628800.0)
+
+
+@device
+def sincos_quarter(x):
+    """(sin x, cos x) for |x| <= pi/4, in float32 only.
+
+    libdevice's sinf/cosf carry a float64 path for huge arguments; angles in warps are
+    bounded, so a short polynomial is exact to float32 and keeps .f64 out of the PTX.
+    """
+    x2 = x * x
+    s = x * (ONE + x2 * (_S3 + x2 * (_S5 + x2 * (_S7 + x2 * _S9))))
+    c = ONE + x2 * (_C2 + x2 * (_C4 + x2 * (_C6 + x2 * (_C8 + x2 * _C10))))
+    return s, c
 
 
 @device
@@ -13,12 +39,12 @@ def square_to_disk_concentric(u1, u2):
     if a == ZERO and b == ZERO:
         return ZERO, ZERO
     if abs(a) > abs(b):
-        r = a
-        phi = PI_OVER_4 * (b / a)
-    else:
-        r = b
-        phi = PI_OVER_2 - PI_OVER_4 * (a / b)
-    return r * math.cos(phi), r * math.sin(phi)
+        # phi = pi/4 * b/a in [-pi/4, pi/4]
+        s, c = sincos_quarter(PI_OVER_4 * (b / a))
+        return a * c, a * s
+    # phi = pi/2 - pi/4 * a/b: cos(phi) = sin(pi/4 a/b), sin(phi) = cos(pi/4 a/b)
+    s, c = sincos_quarter(PI_OVER_4 * (a / b))
+    return b * s, b * c
 
 
 @device
@@ -43,10 +69,14 @@ def square_to_triangle(u1, u2):
 
 @device
 def power_heuristic(pdf_a, pdf_b):
-    """Veach 1997, power heuristic with beta = 2: weight of strategy a."""
-    a2 = pdf_a * pdf_a
-    b2 = pdf_b * pdf_b
-    if a2 + b2 == ZERO:
+    """Veach 1997, power heuristic with beta = 2: weight of strategy a, a^2 / (a^2 + b^2).
+
+    Written as 1 / (1 + (b/a)^2) so that an infinite pdf (a light seen exactly edge-on:
+    cos = 0 in the area-to-solid-angle conversion) gives the limit weight 1 or 0, never
+    inf/inf = NaN; a zero pdf gets weight 0.
+    """
+    if not (pdf_a > ZERO):
         return ZERO
-    return a2 / (a2 + b2)
+    r = pdf_b / pdf_a
+    return ONE / (ONE + r * r)
 

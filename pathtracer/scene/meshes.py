@@ -31,11 +31,8 @@ class ObjMesh:
 
 
 def cache_dir():
-    d = os.environ.get("PT_RENDER_CACHE")
-    if not d:
-        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-        d = os.path.join(base, "pt-render")
-    return os.path.join(d, "meshes")
+    from .._jitcache import cache_root
+    return os.path.join(cache_root(), "meshes")
 
 
 def _cache_key(path, data):

@@ -1,0 +1,189 @@
+"""Core throughput benchmark (issue: core renderer).
+
+Measures, in one run on one machine:
+- camera paths/s and rays/s (camera + bounce + shadow) on the Cornell box, 256x256 on the
+  CPU and 1024x1024 on the GPU: median of repeated passes after a warm-up pass;
+- cold and warm kernel compile times (cold: an empty Numba cache, in a fresh process; warm:
+  a fresh process loading the cache), and the warm start's time to the first pixel;
+- load time (first, uncached, and cached) and BVH build time of a large mesh;
+- the same scene in Mitsuba 3 (llvm_ad_rgb on CPU, cuda_ad_rgb on GPU) when installed.
+
+Writes a JSON record and prints a markdown table.
+
+    python bench/throughput.py --cpu [--mitsuba] [--big-mesh PATH] [--json OUT]
+    python bench/throughput.py --gpu [--mitsuba] [--json OUT]
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+from bench.common import (CORNELL, command, machine, median_time, mitsuba_cornell,  # noqa: E402
+                          now, versions)
+
+
+def ours(backend_name, resolution, spp_per_pass, repeats):
+    from pathtracer.backends import make_backend
+    from pathtracer.scene import compile_scene, load_scene_description
+    desc = load_scene_description(CORNELL)
+    desc.camera.resolution = resolution
+    scene = compile_scene(desc)
+    backend = make_backend(backend_name, scene)
+    t0 = time.perf_counter()
+    backend.compile()
+    compile_s = time.perf_counter() - t0
+    mb, rr = scene.max_bounces, scene.rr_depth
+    state = {"start": 0}
+
+    def one_pass():
+        if backend_name == "cuda":
+            from numba import cuda
+            backend.launch(state["start"], spp_per_pass, 0, mb, rr)
+            cuda.synchronize()
+        else:
+            backend.render_pass(state["start"], spp_per_pass, 0, mb, rr)
+        state["start"] += spp_per_pass
+
+    one_pass()  # warm-up
+    t, times = median_time(one_pass, repeats)
+    # Ray counts of one pass (same scene and spp: counts are stable to << 1%).
+    _, stats = backend.render_pass(state["start"], spp_per_pass, 0, mb, rr)
+    totals = stats.reshape(-1, 3).sum(axis=0, dtype="int64")
+    paths = resolution[0] * resolution[1] * spp_per_pass
+    return {
+        "renderer": f"pt-render {backend_name}", "resolution": list(resolution),
+        "spp_per_pass": spp_per_pass, "repeats": repeats, "pass_s_median": t,
+        "pass_s_all": times, "paths_per_s": paths / t,
+        "rays_per_s": (paths + int(totals[0]) + int(totals[1])) / t,
+        "bounce_rays_per_path": int(totals[0]) / paths,
+        "shadow_rays_per_path": int(totals[1]) / paths,
+        "nonfinite": int(totals[2]), "compile_s_this_process": compile_s,
+    }
+
+
+def mitsuba(variant, resolution, spp, repeats):
+    import drjit as dr
+    import mitsuba as mi
+    mi.set_variant(variant)
+    scene = mitsuba_cornell(resolution[0], resolution[1], spp)
+    seed = [0]
+
+    def one():
+        img = mi.render(scene, spp=spp, seed=seed[0])
+        dr.eval(img)
+        dr.sync_thread()
+        seed[0] += 1
+
+    t0 = time.perf_counter()
+    one()
+    first = time.perf_counter() - t0
+    t, times = median_time(one, repeats)
+    return {"renderer": f"Mitsuba {mi.__version__} {variant}", "resolution": list(resolution),
+            "spp_per_pass": spp, "repeats": repeats, "pass_s_median": t, "pass_s_all": times,
+            "paths_per_s": resolution[0] * resolution[1] * spp / t, "first_render_s": first}
+
+
+COMPILE_PROBE = r"""
+import sys, time, json
+t0 = time.perf_counter()
+from pathtracer.scene import compile_scene, load_scene_description
+from pathtracer.backends import make_backend
+desc = load_scene_description(sys.argv[1]); desc.camera.resolution = (64, 64)
+scene = compile_scene(desc)
+backend = make_backend(sys.argv[2], scene)
+t1 = time.perf_counter()
+backend.compile()
+t2 = time.perf_counter()
+backend.render_pass(0, 1, 0, scene.max_bounces, scene.rr_depth)
+t3 = time.perf_counter()
+print(json.dumps({"import_and_load_s": t1 - t0, "compile_s": t2 - t1,
+                  "first_pass_s": t3 - t2, "to_first_pixel_s": t3 - t0}))
+"""
+
+
+def compile_times(backend_name):
+    """Cold (empty cache) and warm (cache filled by the cold run) compile, fresh processes."""
+    out = {}
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        for label in ("cold", "warm"):
+            r = subprocess.run([sys.executable, "-c", COMPILE_PROBE, CORNELL, backend_name],
+                               capture_output=True, text=True, env=env)
+            if r.returncode != 0:
+                out[label] = {"error": r.stderr.strip().splitlines()[-1:]}
+            else:
+                out[label] = json.loads(r.stdout.strip().splitlines()[-1])
+    return out
+
+
+def big_mesh(path):
+    from pathtracer.accel import build_bvh
+    from pathtracer.scene.meshes import load_obj
+    with tempfile.TemporaryDirectory() as cache:
+        os.environ["PT_RENDER_CACHE"] = cache
+        t0 = time.perf_counter()
+        mesh = load_obj(path)
+        first = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        mesh2 = load_obj(path)
+        second = time.perf_counter() - t0
+        assert mesh2.from_cache
+        del os.environ["PT_RENDER_CACHE"]
+    build_bvh(mesh.positions[:100])  # compile the builder outside the timing
+    times = []
+    for _ in range(3):
+        t0 = time.perf_counter()
+        bvh = build_bvh(mesh.positions)
+        times.append(time.perf_counter() - t0)
+    times.sort()
+    return {"mesh": os.path.basename(path), "triangles": int(len(mesh.positions)),
+            "load_first_s": first, "load_cached_s": second, "bvh_build_s_median": times[1],
+            "bvh_build_s_all": times, "bvh_nodes": int(len(bvh.box)), "bvh_depth": bvh.depth}
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--cpu", action="store_true")
+    p.add_argument("--gpu", action="store_true")
+    p.add_argument("--mitsuba", action="store_true", help="also measure Mitsuba 3")
+    p.add_argument("--big-mesh", help="OBJ for load/BVH timings (make_big_mesh.py output)")
+    p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--json", help="write the record here")
+    a = p.parse_args()
+    rec = {"command": command(), "machine": machine(), "date": now(), "versions": versions(),
+           "results": []}
+    if a.cpu:
+        rec["results"].append(ours("cpu", (256, 256), 16, a.repeats))
+        if a.mitsuba:
+            rec["results"].append(mitsuba("llvm_ad_rgb", (256, 256), 16, a.repeats))
+        rec["compile_cpu"] = compile_times("cpu")
+    if a.gpu:
+        rec["results"].append(ours("cuda", (1024, 1024), 64, a.repeats))
+        if a.mitsuba:
+            rec["results"].append(mitsuba("cuda_ad_rgb", (1024, 1024), 64, a.repeats))
+        rec["compile_cuda"] = compile_times("cuda")
+    if a.big_mesh:
+        rec["big_mesh"] = big_mesh(a.big_mesh)
+    print(f"\n{rec['command']}\n{rec['machine']}, {rec['date']}\n")
+    print("| renderer | resolution | spp/pass | median pass (s) | M camera paths/s | M rays/s |")
+    print("|---|---|---|---|---|---|")
+    for r in rec["results"]:
+        rays = f"{r['rays_per_s'] / 1e6:.1f}" if "rays_per_s" in r else "n/a"
+        print(f"| {r['renderer']} | {r['resolution'][0]}x{r['resolution'][1]} | "
+              f"{r['spp_per_pass']} | {r['pass_s_median']:.4f} | {r['paths_per_s'] / 1e6:.2f} "
+              f"| {rays} |")
+    for k in ("compile_cpu", "compile_cuda", "big_mesh"):
+        if k in rec:
+            print(f"\n{k}: {json.dumps(rec[k], indent=1)}")
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump(rec, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,32 @@
+import os
+import sys
+
+import numpy as np
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SHARED = os.path.join(os.path.dirname(ROOT), "shared")
+sys.path.insert(0, ROOT)
+
+
+def cuda_gpu():
+    if os.environ.get("NUMBA_ENABLE_CUDASIM") == "1":
+        return False
+    try:
+        from numba import cuda
+        return bool(cuda.is_available())
+    except Exception:
+        return False
+
+
+HAS_GPU = cuda_gpu()
+gpu = pytest.mark.skipif(not HAS_GPU, reason="needs a CUDA GPU")
+needs_shared = pytest.mark.skipif(not os.path.isdir(SHARED), reason="needs ../shared")
+
+# Backends every render test runs on: the CPU always, CUDA when a GPU is present.
+BACKENDS = ["cpu"] + (["cuda"] if HAS_GPU else [])
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)

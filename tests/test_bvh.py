@@ -1,0 +1,195 @@
+"""BVH: structure invariants, and traversal equal to brute force on real and adversarial
+geometry."""
+import os
+
+import numpy as np
+import pytest
+from numba import njit
+
+from pathtracer.accel import build_bvh, sah_cost
+from pathtracer.kernels.constants import INF, STACK_SIZE
+from pathtracer.kernels.intersect import ray_triangle
+from pathtracer.kernels.traverse import any_hit, closest_hit
+from pathtracer.scene.meshes import load_obj
+from tests.conftest import SHARED, needs_shared
+
+
+def tri_rows(pos):
+    tri_v = np.zeros((max(1, len(pos)), 9), np.float32)
+    tri_v[:len(pos), 0:3] = pos[:, 0]
+    tri_v[:len(pos), 3:6] = pos[:, 1] - pos[:, 0]
+    tri_v[:len(pos), 6:9] = pos[:, 2] - pos[:, 0]
+    return tri_v
+
+
+@njit(cache=True)
+def trace_all(origins, dirs, tri_v, box, child, skips):
+    n = origins.shape[0]
+    out_t = np.empty(n, np.float32)
+    out_i = np.empty(n, np.int32)
+    out_any = np.empty(n, np.bool_)
+    stack = np.empty(STACK_SIZE, np.int32)
+    for k in range(n):
+        o = (origins[k, 0], origins[k, 1], origins[k, 2])
+        d = (dirs[k, 0], dirs[k, 1], dirs[k, 2])
+        t, i, b1, b2 = closest_hit(o, d, INF, skips[k], tri_v, box, child, stack)
+        out_t[k] = t
+        out_i[k] = i
+        out_any[k] = any_hit(o, d, INF, skips[k], -1, tri_v, box, child, stack)
+    return out_t, out_i, out_any
+
+
+@njit(cache=True)
+def brute_force(origins, dirs, tri_v, n_tri, skips):
+    n = origins.shape[0]
+    out_t = np.empty(n, np.float32)
+    out_i = np.empty(n, np.int32)
+    for k in range(n):
+        o = (origins[k, 0], origins[k, 1], origins[k, 2])
+        d = (dirs[k, 0], dirs[k, 1], dirs[k, 2])
+        best = INF
+        best_i = -1
+        for i in range(n_tri):
+            if i == skips[k]:
+                continue
+            t, b1, b2 = ray_triangle(o, d, tri_v, i, best)
+            if t < best:
+                best = t
+                best_i = i
+        out_t[k] = best
+        out_i[k] = best_i
+    return out_t, out_i
+
+
+def check_against_brute_force(pos, origins, dirs, skips=None):
+    bvh = build_bvh(pos)
+    pos = pos[bvh.order]
+    tri_v = tri_rows(pos)
+    if skips is None:
+        skips = np.full(len(origins), -1, np.int32)
+    origins = origins.astype(np.float32)
+    dirs = dirs.astype(np.float32)
+    t, i, a = trace_all(origins, dirs, tri_v, bvh.box, bvh.child, skips)
+    tb, ib = brute_force(origins, dirs, tri_v, len(pos), skips)
+    # Same distance exactly (same arithmetic); the triangle may differ only at equal t
+    # (a ray through a shared edge or vertex hits both triangles at the same t).
+    assert np.array_equal(t, tb)
+    same = (i == ib) | (t == tb)
+    assert same.all()
+    assert np.array_equal(a, ib >= 0)   # any-hit agrees with the existence of a hit
+    return bvh, t, i
+
+
+def check_structure(bvh, pos):
+    n = len(pos)
+    seen = np.zeros(n, int)
+    lo = pos.min(axis=1)
+    hi = pos.max(axis=1)
+    for k in range(len(bvh.box)):
+        for side in range(2):
+            c, cnt = bvh.child[k, 2 * side], bvh.child[k, 2 * side + 1]
+            b = bvh.box[k, 6 * side:6 * side + 6]
+            if cnt > 0:
+                seen[c:c + cnt] += 1
+                idx = bvh.order[c:c + cnt]
+                assert (lo[idx] >= b[0:3]).all() and (hi[idx] <= b[3:6]).all()
+            elif cnt == 0:
+                # the child's own children lie inside this box
+                cb = bvh.box[c]
+                for s2 in range(2):
+                    if bvh.child[c, 2 * s2 + 1] >= 0:
+                        assert (cb[6 * s2:6 * s2 + 3] >= b[0:3]).all()
+                        assert (cb[6 * s2 + 3:6 * s2 + 6] <= b[3:6]).all()
+    assert (seen == 1).all(), "every triangle in exactly one leaf"
+    assert sorted(bvh.order.tolist()) == list(range(n))
+    assert bvh.depth < STACK_SIZE - 2
+
+
+def random_rays(rng, n, lo, hi):
+    center = (lo + hi) / 2
+    extent = (hi - lo).max()
+    origins = center + (rng.random((n, 3)) - 0.5) * 3 * extent
+    targets = lo + rng.random((n, 3)) * (hi - lo)
+    d = targets - origins
+    return origins, d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+@needs_shared
+def test_bunny_random_rays(rng):
+    mesh = load_obj(os.path.join(SHARED, "assets", "models", "stanford_bunny.obj"),
+                    use_cache=False)
+    pos = mesh.positions
+    lo, hi = pos.reshape(-1, 3).min(0), pos.reshape(-1, 3).max(0)
+    origins, dirs = random_rays(rng, 20000, lo, hi)
+    bvh, t, i = check_against_brute_force(pos, origins, dirs)
+    check_structure(bvh, pos)
+    assert (i >= 0).mean() > 0.3   # the rays do hit the bunny
+    # The SAH tree is far cheaper than a single leaf over all triangles.
+    assert sah_cost(bvh) < len(pos) / 100
+
+
+def test_edges_vertices_parallel_and_degenerate(rng):
+    # A grid of unit squares (2 triangles each) in the z = 0 plane, plus degenerate
+    # triangles: zero-area (repeated vertex), collinear, and a sliver.
+    tris = []
+    for x in range(4):
+        for y in range(4):
+            a, b, c, d = [x, y, 0], [x + 1, y, 0], [x + 1, y + 1, 0], [x, y + 1, 0]
+            tris += [[a, b, c], [a, c, d]]
+    tris += [[[1, 1, 1], [1, 1, 1], [2, 2, 1]],           # zero area
+             [[0, 0, 2], [1, 1, 2], [2, 2, 2]],           # collinear
+             [[0, 0, 3], [4, 0, 3], [4, 1e-7, 3]]]        # sliver
+    pos = np.array(tris, np.float32)
+    origins, dirs = [], []
+    # Straight down through every grid vertex, edge midpoint and the diagonal.
+    for x in np.arange(0, 4.01, 0.5):
+        for y in np.arange(0, 4.01, 0.5):
+            origins.append([x, y, 5])
+            dirs.append([0, 0, -1])
+    # Rays parallel to the plane, in the plane and just above it.
+    for z in (0.0, 1e-6):
+        for y in np.arange(0, 4.01, 0.5):
+            origins.append([-1, y, z])
+            dirs.append([1, 0, 0])
+    # Random oblique rays.
+    o, d = random_rays(rng, 3000, np.array([0, 0, -1.0]), np.array([4, 4, 3.0]))
+    origins = np.concatenate([np.array(origins, float), o])
+    dirs = np.concatenate([np.array(dirs, float), d])
+    bvh, t, i = check_against_brute_force(pos, origins, dirs)
+    check_structure(bvh, pos)
+    n_down = 81
+    # Every vertical ray over the grid's closed area hits it, none is lost on an edge.
+    assert (i[:n_down] >= 0).all()
+    # Rays lying in the plane of the grid never hit it (det == 0).
+    assert (i[n_down:n_down + 9] < 0).all()
+
+
+def test_skip_triangle(rng):
+    pos = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+                    [[0, 0, 1], [1, 0, 1], [0, 1, 1]]], np.float32)
+    bvh = build_bvh(pos)
+    first = int(np.nonzero(bvh.order == 0)[0][0])
+    o = np.array([[0.2, 0.2, -1.0]])
+    d = np.array([[0, 0, 1.0]])
+    _, t, i = check_against_brute_force(pos, o, d, np.array([first], np.int32))
+    assert t[0] == pytest.approx(2.0) and i[0] != first
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 7])
+def test_tiny_scenes(n, rng):
+    pos = rng.random((n, 3, 3)).astype(np.float32)
+    origins, dirs = random_rays(rng, 200, np.zeros(3), np.ones(3))
+    bvh, _, _ = check_against_brute_force(pos, origins, dirs)
+    if n:
+        check_structure(bvh, pos)
+
+
+def test_coincident_centroids():
+    """Many triangles sharing one centroid: no spatial split exists; still correct."""
+    base = np.array([[-1, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
+    pos = np.stack([base * (1 + 0.01 * k) for k in range(100)])
+    pos -= pos.mean(axis=1, keepdims=True)
+    rng = np.random.default_rng(1)
+    origins, dirs = random_rays(rng, 500, pos.reshape(-1, 3).min(0), pos.reshape(-1, 3).max(0))
+    bvh, _, _ = check_against_brute_force(pos, origins, dirs)
+    check_structure(bvh, pos)

@@ -1,0 +1,197 @@
+"""Renders against analytic answers and the Mitsuba 3 reference, on every backend."""
+import os
+
+import numpy as np
+import pytest
+
+from pathtracer.backends import make_backend
+from pathtracer.metrics import relmse
+from pathtracer.render import render
+from pathtracer.scene import load_scene
+from tests.conftest import BACKENDS, ROOT, SHARED, gpu, needs_shared
+from tests.scenes import furnace_scene, write_scene
+
+CORNELL = os.path.join(ROOT, "scenes", "cornell-box.json")
+CORNELL_REF = os.path.join(SHARED, "reference", "cornell-box", "reference_256_d8.npy")
+REF_NOISE = 1.95e-5          # the reference's own relMSE (reference_256_d8.json)
+MITSUBA_RELMSE_SPP = 0.28    # Mitsuba independent sampler: relMSE ~ 0.28 / spp
+
+
+def run(scene, backend="cpu", spp=None, **kw):
+    result = render(scene, make_backend(backend, scene), spp=spp, **kw)
+    assert result.film.nonfinite == 0, "NaN or Inf samples"
+    return result
+
+
+def mean_and_se(img):
+    """Image mean per channel and its standard error (pixels are independent)."""
+    px = img.reshape(-1, 3).astype(np.float64)
+    return px.mean(0), px.std(0, ddof=1) / np.sqrt(len(px))
+
+
+@needs_shared
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_cornell_box_matches_mitsuba(backend):
+    spp = 64 if backend == "cpu" else 1024
+    scene = load_scene(CORNELL)
+    img = run(scene, backend, spp=spp).film.image()
+    ref = np.load(CORNELL_REF)
+    # Per-channel image mean within 0.5% of the reference's (at 64 spp the mean's own
+    # noise is ~0.1%).
+    ratio = img.mean((0, 1)) / ref.mean((0, 1))
+    assert np.all(np.abs(ratio - 1) < 0.005), ratio
+    # relMSE at most 2x Mitsuba's at the same spp plus the reference's noise.
+    err = relmse(img, ref)
+    assert err <= 2 * MITSUBA_RELMSE_SPP / spp + REF_NOISE, err
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("albedo, emission, max_bounces, rr_depth", [
+    (0.5, 0.5, 5, 5),
+    ([0.9, 0.5, 0.1], [1.0, 0.5, 2.0], 12, 2),   # Russian roulette from bounce 2
+    (0.8, 1.0, 0, 5),                             # emitters seen directly only
+])
+def test_furnace_inside_emitting_sphere(tmp_path, backend, albedo, emission, max_bounces,
+                                        rr_depth):
+    """Inside a closed shell that emits Le and reflects a: L = Le * sum_{k<=N} a^k."""
+    scene_dict = furnace_scene(albedo, emission, max_bounces, res=(24, 24))
+    scene_dict["render"]["rrDepth"] = rr_depth
+    scene = load_scene(write_scene(tmp_path, scene_dict))
+    img = run(scene, backend, spp=64).film.image()
+    a = np.broadcast_to(np.asarray(albedo, float), 3)
+    le = np.broadcast_to(np.asarray(emission, float), 3)
+    expected = le * sum(a ** k for k in range(max_bounces + 1))
+    mean, se = mean_and_se(img)
+    assert np.all(np.abs(mean - expected) <= 5 * se + 1e-6 * expected), (mean, expected, se)
+    assert np.all(se < 0.01 * expected)   # the bound is tight enough to mean something
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_point_light_irradiance(tmp_path, backend):
+    """A point light of intensity I at height h over a Lambertian plane: L = a/pi I cos/d^2."""
+    h, intensity, albedo = 1.0, 2.0, 0.8
+    s = 50.0
+    scene_dict = {
+        "camera": {"resolution": [16, 16], "position": [0, 0, 3], "lookAt": [0, 0, 0],
+                   "up": [0, 1, 0], "fov": 20},
+        "render": {"maxBounces": 1},
+        "materials": [{"name": "m", "type": "diffuse", "albedo": albedo}],
+        "objects": [{"name": "plane", "vertices": [[-s, -s, 0], [s, -s, 0], [s, s, 0],
+                                                   [-s, s, 0]],
+                     "faces": [[0, 1, 2], [0, 2, 3]], "material": "m"}],
+        "lights": [{"type": "point", "position": [0, 0, h], "intensity": intensity}],
+    }
+    scene = load_scene(write_scene(tmp_path, scene_dict))
+    img = run(scene, backend, spp=256).film.image()
+    # The expectation is the pixel-area average (box filter): integrate on a 32x32 grid per
+    # pixel. The plane point seen through image position (sx, sy) in [-1, 1]^2 is
+    # (sx, sy) * tan(fov/2) * 3 (camera at height 3 looking down).
+    t = np.tan(np.radians(10.0))
+    sub = (np.arange(16 * 32) + 0.5) / (16 * 32) * 2 - 1
+    x = sub[None, :] * t * 3
+    y = -sub[:, None] * t * 3
+    d2 = x * x + y * y + h * h
+    fine = albedo / np.pi * intensity * (h / np.sqrt(d2)) / d2
+    blocks = fine.reshape(16, 32, 16, 32)
+    expected = blocks.mean(axis=(1, 3))
+    # NEE to the one point light is deterministic given the pixel position, so the only
+    # noise is the uniform jitter: standard error = within-pixel std / sqrt(spp).
+    se = blocks.std(axis=(1, 3)) / np.sqrt(256)
+    z = (img[..., 0] - expected) / (se + 1e-7 * expected)
+    assert np.abs(z).max() < 5.5, np.abs(z).max()     # ~Sidak for 256 pixels at 1e-5
+    assert np.abs(z).mean() < 1.2                      # E|z| = 0.8 for unit normals
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_constant_environment(tmp_path, backend):
+    """An upward Lambertian plane under a constant sky: L = albedo * sky, every sample."""
+    s = 1000.0
+    sky = [0.5, 1.0, 2.0]
+    scene_dict = {
+        "camera": {"resolution": [8, 8], "position": [0, 0, 1], "lookAt": [0, 0, 0],
+                   "up": [0, 1, 0], "fov": 30},
+        "render": {"maxBounces": 1},
+        "materials": [{"name": "m", "type": "diffuse", "albedo": 0.6}],
+        "objects": [{"name": "plane", "vertices": [[-s, -s, 0], [s, -s, 0], [s, s, 0],
+                                                   [-s, s, 0]],
+                     "faces": [[0, 1, 2], [0, 2, 3]], "material": "m"}],
+        "environment": {"color": sky},
+    }
+    scene = load_scene(write_scene(tmp_path, scene_dict))
+    img = run(scene, backend, spp=16).film.image()
+    assert np.allclose(img, 0.6 * np.array(sky), rtol=1e-5)
+    img0 = run(scene, backend, spp=4, max_bounces=0).film.image()
+    assert np.all(img0 == 0)
+
+
+def test_smooth_normals_render_finite(tmp_path):
+    """Smooth shading on a coarse sphere lit by a point light: finite, no leaks on the
+    unlit side (a shading normal never brings light below the geometric surface)."""
+    from tests.scenes import sphere_mesh
+    v, f = sphere_mesh(6, 12)
+    scene_dict = {
+        "camera": {"resolution": [32, 32], "position": [0, 0, 4], "lookAt": [0, 0, 0],
+                   "fov": 40},
+        "render": {"maxBounces": 3},
+        "materials": [{"name": "m", "type": "diffuse", "albedo": 0.7}],
+        "objects": [{"name": "s", "vertices": v, "faces": f, "material": "m", "smooth": True}],
+        "lights": [{"type": "point", "position": [10, 0, 0], "intensity": 100}],
+    }
+    scene = load_scene(write_scene(tmp_path, scene_dict))
+    assert scene.features.smooth
+    img = run(scene, "cpu", spp=16).film.image()
+    scene_dict["objects"][0]["smooth"] = False
+    flat = run(load_scene(write_scene(tmp_path, scene_dict, "flat.json")), "cpu",
+               spp=16).film.image()
+    # Smooth shading redistributes light over the lit side but keeps its total close to
+    # the flat-shaded one, and puts none on the far side.
+    assert img[:, 16:].sum() == pytest.approx(flat[:, 16:].sum(), rel=0.1)
+    assert img[:, :12].max() == 0 and flat[:, :12].max() == 0
+
+
+def test_nonfinite_samples_are_counted(tmp_path):
+    """The NaN/Inf counter works (so 'nonfinite == 0' in the other tests means something)."""
+    scene = load_scene(write_scene(tmp_path, furnace_scene(0.5, 0.5, 2, res=(4, 4))))
+    scene.arrays.mat[0, 3] = np.nan   # poison the emission behind the loader's back
+    result = render(scene, make_backend("cpu", scene), spp=2)
+    assert result.film.nonfinite == 4 * 4 * 2
+
+
+def test_specialisation_removes_unused_code():
+    """A kernel for a scene without point lights, environment or smooth normals is smaller
+    than the one with all of them: the unused branches are not compiled."""
+    from numba import njit
+
+    from pathtracer.kernels.integrator import Features, make_render_pixel
+    scene = load_scene(CORNELL)
+    sizes = []
+    variants = [Features(True, False, False, False), Features(True, True, False, False),
+                Features(True, False, True, False), Features(True, False, False, True)]
+    for features in variants:
+        render_pixel = make_render_pixel(features)
+
+        @njit(error_model="numpy")   # not cached: inspect_llvm needs a fresh compile
+        def one_pixel(out, stats, stack, scene_arrays):
+            render_pixel(0, 0, 0, 1, 0, 3, 5, scene_arrays, stack, out, stats)
+
+        args = (np.zeros((1, 1, 3), np.float32), np.zeros((1, 1, 3), np.int32),
+                np.zeros(64, np.int32), scene.arrays)
+        one_pixel(*args)
+        sizes.append(sum(len(x) for x in one_pixel.inspect_llvm().values()))
+    # Each feature, when present, adds code; when absent, none of it is compiled.
+    assert all(size > 1.01 * sizes[0] for size in sizes[1:]), sizes
+
+
+@gpu
+def test_cpu_cuda_parity():
+    """Same seed and spp: CPU and CUDA draw the same random numbers and run the same
+    float32 code; images agree to float tolerance (FMA contraction differs), ray counts
+    exactly unless a rounding flips a Russian-roulette decision."""
+    scene = load_scene(CORNELL)
+    cpu = make_backend("cpu", scene)
+    cuda = make_backend("cuda", scene)
+    a, sa = [x.copy() for x in cpu.render_pass(0, 8, 3, 7, 5)]
+    b, sb = [x.copy() for x in cuda.render_pass(0, 8, 3, 7, 5)]
+    assert np.abs(a - b).max() < 1e-3 * max(1.0, float(a.max()))
+    assert np.isclose(a.sum(), b.sum(), rtol=1e-5)
+    assert (sa == sb).all(-1).mean() > 0.999
