@@ -143,6 +143,12 @@ def main(argv=None):
 
     from .render import render
     from .progress import Progress
+    t0 = time.perf_counter()
+    if not args.quiet:
+        print("pt-render: compiling kernels (cached on disk after the first run)...", file=log)
+    backend.compile()
+    if not args.quiet:
+        print(f"pt-render: kernels ready in {time.perf_counter() - t0:.2f} s", file=log)
     progress = Progress(spp, args.time, scene.width * scene.height, quiet=args.quiet,
                         stream=log)
     rows = []

@@ -1,0 +1,52 @@
+"""The CUDA kernel under the CUDA simulator (CI has no GPU): same source, same numbers.
+
+The simulator must be switched on before Numba is imported, so it runs in a subprocess.
+"""
+import json
+import os
+import subprocess
+import sys
+
+from tests.conftest import ROOT
+
+SCRIPT = r"""
+import json, sys, tempfile
+import numpy as np
+sys.path.insert(0, sys.argv[1])
+from pathtracer.scene import load_scene, load_scene_description, compile_scene
+from pathtracer.backends.cuda import CUDABackend
+from pathtracer.backends.cpu import CPUBackend
+from tests.scenes import furnace_scene, write_scene
+out = {}
+d = load_scene_description(sys.argv[1] + "/scenes/cornell-box.json")
+d.camera.resolution = (6, 5)
+s = compile_scene(d)
+a, sa = [x.copy() for x in CUDABackend(s).render_pass(0, 2, 1, 7, 5)]
+b, sb = [x.copy() for x in CPUBackend(s).render_pass(0, 2, 1, 7, 5)]
+out["cornell_maxdiff"] = float(np.abs(a - b).max())
+out["cornell_sum"] = [float(a.sum()), float(b.sum())]
+out["stats_equal"] = bool((sa == sb).all())
+# Furnace on the simulator: L = Le * sum_{k<=3} a^k.
+f = load_scene(write_scene(tempfile.mkdtemp(), furnace_scene(0.5, 0.5, 3, res=(4, 4))))
+img, st = CUDABackend(f).render_pass(0, 24, 0, 3, 5)
+px = (img / 24).reshape(-1, 3)
+out["furnace_mean"] = float(px.mean())
+out["furnace_se"] = float(px[:, 0].std(ddof=1) / np.sqrt(len(px)))
+out["nonfinite"] = int(st[..., 2].sum())
+print(json.dumps(out))
+"""
+
+
+def test_cuda_kernel_on_simulator():
+    env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1")
+    r = subprocess.run([sys.executable, "-c", SCRIPT, ROOT], capture_output=True, text=True,
+                       env=env, cwd=ROOT, timeout=900)
+    assert r.returncode == 0, r.stderr[-3000:]
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    assert out["cornell_sum"][0] > 0
+    # The simulator runs the same float32 code as the CPU backend.
+    assert out["cornell_maxdiff"] < 1e-4, out
+    assert out["stats_equal"]
+    expected = 0.5 * (1 + 0.5 + 0.25 + 0.125)
+    assert abs(out["furnace_mean"] - expected) < 5 * out["furnace_se"] + 1e-6, out
+    assert out["nonfinite"] == 0
