@@ -12,6 +12,18 @@ def write_scene(tmp_path, scene, name="scene.json"):
     return path
 
 
+def _orient_outward(verts, faces):
+    """Reorder each triangle of a mesh that is star-shaped about the origin so that its
+    counter-clockwise front faces away from the origin."""
+    v = np.array(verts, float)
+    f = np.array(faces)
+    for k, (a, b, c) in enumerate(f):
+        n = np.cross(v[b] - v[a], v[c] - v[a])
+        if np.dot(n, v[a] + v[b] + v[c]) < 0:
+            f[k] = [a, c, b]
+    return v.tolist(), f.tolist()
+
+
 def box_mesh(half=1.0):
     """A closed cube [-half, half]^3: 8 vertices, 12 triangles facing outward."""
     v = [[x, y, z] for x in (-half, half) for y in (-half, half) for z in (-half, half)]
@@ -20,14 +32,7 @@ def box_mesh(half=1.0):
     faces = []
     for a, b, c, d in quads:
         faces += [[a, b, c], [a, c, d]]
-    v = np.array(v, float)
-    f = np.array(faces)
-    # orient each triangle outward
-    for i, (a, b, c) in enumerate(f):
-        n = np.cross(v[b] - v[a], v[c] - v[a])
-        if np.dot(n, v[a] + v[b] + v[c]) < 0:
-            f[i] = [a, c, b]
-    return v.tolist(), f.tolist()
+    return _orient_outward(v, faces)
 
 
 def sphere_mesh(n_theta=12, n_phi=24, radius=1.0):
@@ -53,13 +58,7 @@ def sphere_mesh(n_theta=12, n_phi=24, radius=1.0):
         for j in range(n_phi):
             a, b, c, d = ring(i, j), ring(i, j + 1), ring(i + 1, j + 1), ring(i + 1, j)
             faces += [[a, b, c], [a, c, d]]
-    v = np.array(verts)
-    f = np.array(faces)
-    for k, (a, b, c) in enumerate(f):
-        n = np.cross(v[b] - v[a], v[c] - v[a])
-        if np.dot(n, v[a] + v[b] + v[c]) < 0:
-            f[k] = [a, c, b]
-    return v.tolist(), f.tolist()
+    return _orient_outward(verts, faces)
 
 
 def furnace_scene(albedo, emission, max_bounces, res=(16, 16), mesh="sphere", spp=64):

@@ -66,7 +66,15 @@ def test_nan_coordinates(tmp_path):
     scene = minimal()
     raw = json.dumps(scene).replace("[-1.0, -1.0, -1.0]", "[NaN, -1.0, -1.0]", 1)
     msg, _ = error_of(tmp_path, None, raw)
-    assert "NaN" in msg
+    assert "NaN" in msg and "line 1" in msg
+
+
+def test_nan_in_obj_file(tmp_path):
+    (tmp_path / "n.obj").write_text("v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n")
+    scene = minimal()
+    scene["objects"][0] = {"name": "o", "file": "n.obj", "material": "white"}
+    msg, _ = error_of(tmp_path, scene)
+    assert "/objects/0/file" in msg and "NaN" in msg
 
 
 def test_bad_json_names_line(tmp_path):

@@ -8,6 +8,7 @@ built yet raise a "not supported yet" error rather than rendering a different im
 import json
 import math
 import os
+import re
 from dataclasses import dataclass, field
 from typing import Optional
 
@@ -249,7 +250,8 @@ def _strict_json(path):
     except FileNotFoundError:
         raise SceneError("scene file not found", path) from None
     except IsADirectoryError:
-        raise SceneError("is a folder: thesis-style scene folders " + NOT_YET, path) from None
+        raise SceneError("is a folder; scene folders in the thesis layout " + NOT_YET,
+                         path) from None
     except (OSError, UnicodeDecodeError) as e:
         raise SceneError(f"cannot read: {e}", path) from None
     try:
@@ -258,7 +260,13 @@ def _strict_json(path):
         raise SceneError(f"invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}",
                          path) from None
     except ValueError as e:
-        raise SceneError(f"invalid JSON: {e}", path) from None
+        where = ""
+        m = re.search(r"-?\b(NaN|Infinity)\b", text) if "valid JSON" in str(e) else None
+        if m:
+            line = text.count("\n", 0, m.start()) + 1
+            col = m.start() - (text.rfind("\n", 0, m.start()) + 1) + 1
+            where = f" at line {line}, column {col}"
+        raise SceneError(f"invalid JSON{where}: {e}", path) from None
 
 
 def load_scene_description(path):
