@@ -157,29 +157,39 @@ def test_nonfinite_samples_are_counted(tmp_path):
     assert result.film.nonfinite == 4 * 4 * 2
 
 
+SPECIALISATION_PROBE = r"""
+import sys
+import numpy as np
+from numba import njit
+sys.path.insert(0, sys.argv[1])
+from pathtracer.kernels.integrator import Features, make_render_pixel
+from pathtracer.scene import load_scene
+scene = load_scene(sys.argv[1] + "/scenes/cornell-box.json")
+render_pixel = make_render_pixel(Features(*(bool(int(c)) for c in sys.argv[2])))
+
+@njit(error_model="numpy")   # not cached: inspect_llvm needs a fresh compile
+def one_pixel(out, stats, stack, scene_arrays):
+    render_pixel(0, 0, 0, 1, 0, 3, 5, scene_arrays, stack, out, stats)
+
+one_pixel(np.zeros((1, 1, 3), np.float32), np.zeros((1, 1, 3), np.int32),
+          np.zeros(64, np.int32), scene.arrays)
+print(sum(len(x) for x in one_pixel.inspect_llvm().values()))
+"""
+
+
 def test_specialisation_removes_unused_code():
-    """A kernel for a scene without point lights, environment or smooth normals is smaller
-    than the one with all of them: the unused branches are not compiled."""
-    from numba import njit
-
-    from pathtracer.kernels.integrator import Features, make_render_pixel
-    scene = load_scene(CORNELL)
+    """A kernel for a scene without point lights, environment or smooth normals compiles
+    none of their code: each flag, when set, adds code to the base kernel. Each variant is
+    compiled in a fresh process (the IR of one process depends on what it compiled before)."""
+    import subprocess
+    import sys
     sizes = []
-    variants = [Features(True, False, False, False), Features(True, True, False, False),
-                Features(True, False, True, False), Features(True, False, False, True)]
-    for features in variants:
-        render_pixel = make_render_pixel(features)
-
-        @njit(error_model="numpy")   # not cached: inspect_llvm needs a fresh compile
-        def one_pixel(out, stats, stack, scene_arrays):
-            render_pixel(0, 0, 0, 1, 0, 3, 5, scene_arrays, stack, out, stats)
-
-        args = (np.zeros((1, 1, 3), np.float32), np.zeros((1, 1, 3), np.int32),
-                np.zeros(64, np.int32), scene.arrays)
-        one_pixel(*args)
-        sizes.append(sum(len(x) for x in one_pixel.inspect_llvm().values()))
-    # Each feature, when present, adds code; when absent, none of it is compiled.
-    assert all(size > 1.01 * sizes[0] for size in sizes[1:]), sizes
+    for flags in ("1000", "1100", "1010", "1001"):   # tri lights + point / env / smooth
+        r = subprocess.run([sys.executable, "-c", SPECIALISATION_PROBE, ROOT, flags],
+                           capture_output=True, text=True, cwd=ROOT, timeout=600)
+        assert r.returncode == 0, r.stderr[-2000:]
+        sizes.append(int(r.stdout.split()[-1]))
+    assert all(size > sizes[0] for size in sizes[1:]), sizes
 
 
 @gpu
