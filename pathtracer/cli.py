@@ -147,8 +147,9 @@ def main(argv=None):
     if not args.quiet:
         print("pt-render: compiling kernels (cached on disk after the first run)...", file=log)
     backend.compile()
+    compile_seconds = time.perf_counter() - t0
     if not args.quiet:
-        print(f"pt-render: kernels ready in {time.perf_counter() - t0:.2f} s", file=log)
+        print(f"pt-render: kernels ready in {compile_seconds:.2f} s", file=log)
     progress = Progress(spp, args.time, scene.width * scene.height, quiet=args.quiet,
                         stream=log)
     rows = []
@@ -191,7 +192,7 @@ def main(argv=None):
     paths = film.camera_rays / result.seconds if result.seconds > 0 else float("nan")
     rays = (film.camera_rays + film.bounce_rays + film.shadow_rays)
     print(f"pt-render: {film.spp} spp in {result.seconds:.2f} s (compile "
-          f"{result.compile_seconds:.2f} s): {paths / 1e6:.3f} M camera paths/s, "
+          f"{compile_seconds:.2f} s): {paths / 1e6:.3f} M camera paths/s, "
           f"{rays / max(result.seconds, 1e-9) / 1e6:.3f} M rays/s; wrote {output}"
           + (f" and {float_output}" if float_output else ""), file=log)
     if film.nonfinite:

@@ -144,26 +144,29 @@ def make_render_pixel(features):
             if ANY_LIGHTS:
                 k = sample_discrete(scene.light_cdf, sample_1d(key, dim + D_LIGHT_SELECT))
                 ref = scene.light_ref[k]
-                pmf = scene.light_cdf[k + 1] - scene.light_cdf[k]
                 u1 = sample_1d(key, dim + D_LIGHT_U)
                 u2 = sample_1d(key, dim + D_LIGHT_V)
                 if TRI_LIGHTS and ref >= 0:
-                    q, nl, area = sample_triangle_point(scene.tri_v, ref, u1, u2)
+                    q, nl, _ = sample_triangle_point(scene.tri_v, ref, u1, u2)
                     wi, dist = direction_to(p, q)
                     cos_l = -dot(nl, wi)
                     lm = scene.tri_mat[ref]
-                    if dist > ZERO and area > ZERO and emits(scene.mat, lm, cos_l):
+                    # tri_light_pdf = selection pmf / area: the same density the
+                    # emission-hit MIS above uses (0 for zero-area triangles).
+                    pdf_area = scene.tri_light_pdf[ref]
+                    if dist > ZERO and pdf_area > ZERO and emits(scene.mat, lm, cos_l):
                         f, pdf_bsdf = diffuse_eval(scene.mat, m, n, ng, wi)
                         if pdf_bsdf > ZERO:
                             n_shadow_rays += 1
                             if not any_hit(origin, wi, dist * SHADOW_SHORTEN, tri, ref,
                                            scene.tri_v, scene.bvh_box, scene.bvh_child, stack):
-                                pdf_light = pmf / area * dist * dist / abs(cos_l)
+                                pdf_light = pdf_area * dist * dist / abs(cos_l)
                                 weight = power_heuristic(pdf_light, pdf_bsdf) / pdf_light
                                 radiance = add(radiance, scale(
                                     mul(mul(beta, f), emission(scene.mat, lm)), weight))
                 if POINT_LIGHTS and ref < 0:
                     pl = -ref - 1
+                    pmf = scene.light_cdf[k + 1] - scene.light_cdf[k]
                     wi, dist = direction_to(p, load3(scene.point_lights, pl, 0))
                     if dist > ZERO:
                         f, pdf_bsdf = diffuse_eval(scene.mat, m, n, ng, wi)
@@ -184,7 +187,7 @@ def make_render_pixel(features):
                 break
             beta = mul(beta, weight)
             pdf_prev = pdf_bsdf
-            o = offset_origin(p, ng)
+            o = origin
             d = wi
             skip = tri
             bounce += 1
