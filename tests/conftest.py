@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SHARED = os.path.join(os.path.dirname(ROOT), "shared")
+# ../shared beside the clone; PT_RENDER_SHARED points elsewhere (the GPU machine gets a copy).
+SHARED = os.environ.get("PT_RENDER_SHARED") or os.path.join(os.path.dirname(ROOT), "shared")
 sys.path.insert(0, ROOT)
 
 
