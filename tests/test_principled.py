@@ -1,0 +1,135 @@
+"""The principled BSDF: chi-square tests of its sampling against its pdf over a grid of
+parameters (Mitsuba's chi2.py method: directions histogrammed over (cos theta, phi) cells,
+the pdf integrated over each cell on a sub-grid), weight == eval / pdf, reciprocity of the
+reflection lobes, and energy bounds."""
+import math
+
+import numpy as np
+import pytest
+from numba import njit
+
+from pathtracer.kernels.principled import P_FIELDS, principled_eval, principled_sample
+from pathtracer.kernels.rng import path_key, sample_1d
+from tests.test_sampling import chi2_test
+
+F = np.float32
+
+
+def params(**kw):
+    d = dict(r=0.8, g=0.5, b=0.3, roughness=0.5, metallic=0.0, eta=1.5, spec_tint=0.0,
+             anisotropic=0.0, sheen=0.0, sheen_tint=0.0, clearcoat=0.0, clearcoat_gloss=0.0,
+             flatness=0.0, transmission=0.0)
+    for k, v in kw.items():
+        assert k in d, k
+        d[k] = v
+    return tuple(F(d[k]) for k in P_FIELDS)
+
+
+def direction(cos_theta, phi=0.3):
+    s = math.sqrt(max(0.0, 1 - cos_theta * cos_theta))
+    return (F(s * math.cos(phi)), F(s * math.sin(phi)), F(cos_theta))
+
+
+@njit(cache=True)
+def _sample_hist(p, wo, n, seed, n_cos, n_phi):
+    h = np.zeros((n_cos, n_phi))
+    bad = 0
+    for i in range(n):
+        k = path_key(i, 7, seed)
+        wi, w, pdf = principled_sample(p, wo, sample_1d(k, 0), sample_1d(k, 1),
+                                       sample_1d(k, 2))
+        if pdf <= 0:
+            continue
+        # the pdf of a returned direction must be what eval says, and weight = eval / pdf
+        f, pdf2 = principled_eval(p, wo, wi)
+        if abs(pdf2 - pdf) > 1e-4 * pdf or not np.isfinite(w[0] + w[1] + w[2]):
+            bad += 1
+        for c in range(3):
+            if abs(f[c] / pdf2 - w[c]) > 1e-3 * max(abs(w[c]), 1e-3):
+                bad += 1
+        z = min(max(wi[2], -1.0), 1.0)
+        ci = min(int((z + 1.0) * 0.5 * n_cos), n_cos - 1)
+        phi = math.atan2(wi[1], wi[0])
+        if phi < 0:
+            phi += 2 * math.pi
+        pj = min(int(phi / (2 * math.pi) * n_phi), n_phi - 1)
+        h[ci, pj] += 1
+    return h, bad
+
+
+@njit(cache=True)
+def _pdf_integral(p, wo, n_cos, n_phi, sub):
+    """Integral of the pdf over each (cos theta, phi) cell: midpoint rule on sub x sub,
+    refined near the horizon, where refraction near the critical angle has an integrable
+    singularity (the half-vector Jacobian grows like 1 / cos theta)."""
+    out = np.zeros((n_cos, n_phi))
+    dc = 2.0 / n_cos
+    dp = 2 * math.pi / n_phi
+    sub0 = sub
+    for i in range(n_cos):
+        z_mid = -1.0 + (i + 0.5) * dc
+        sub = sub0 * 6 if abs(z_mid) < 0.1 else sub0
+        for j in range(n_phi):
+            acc = 0.0
+            for a in range(sub):
+                z = -1.0 + (i + (a + 0.5) / sub) * dc
+                s = math.sqrt(max(0.0, 1 - z * z))
+                for b in range(sub):
+                    phi = (j + (b + 0.5) / sub) * dp
+                    wi = (np.float32(s * math.cos(phi)), np.float32(s * math.sin(phi)),
+                          np.float32(z))
+                    acc += principled_eval(p, wo, wi)[1]
+            out[i, j] = acc * dc * dp / (sub * sub)
+    return out
+
+
+CASES = [
+    ("default", params(), 0.7),
+    ("rough1", params(roughness=1.0), 0.3),
+    ("metal_smoothish", params(metallic=1.0, roughness=0.1), 0.7),
+    ("metal_grazing", params(metallic=1.0, roughness=0.3), 0.1),
+    ("anisotropic", params(metallic=1.0, roughness=0.4, anisotropic=0.9), 0.6),
+    ("sheen_clearcoat", params(roughness=0.8, sheen=1.0, sheen_tint=0.5, clearcoat=1.0,
+                               clearcoat_gloss=0.7), 0.5),
+    ("subsurface_tint", params(flatness=1.0, spec_tint=1.0), 0.4),
+    ("glass_front", params(transmission=1.0, roughness=0.3), 0.8),
+    ("glass_inside", params(transmission=1.0, roughness=0.3), -0.8),
+    ("glass_inside_tir", params(transmission=1.0, roughness=0.4), -0.3),
+    ("eta_below_1", params(transmission=1.0, roughness=0.35, eta=0.7), 0.6),
+    ("eta_3", params(transmission=1.0, roughness=0.5, eta=3.0), 0.5),
+    ("mix", params(transmission=0.5, roughness=0.6, metallic=0.2, clearcoat=0.5,
+                   anisotropic=0.5, sheen=0.5), 0.7),
+    ("mix_inside", params(transmission=0.7, roughness=0.5, anisotropic=0.3), -0.6),
+    ("rough_glass", params(transmission=1.0, roughness=1.0), 0.5),
+]
+
+
+@pytest.mark.parametrize("name,p,cos_o", CASES, ids=[c[0] for c in CASES])
+def test_principled_chi2(name, p, cos_o):
+    wo = direction(cos_o)
+    n_cos, n_phi, n = 48, 96, 400_000
+    h, bad = _sample_hist(p, wo, n, 11, n_cos, n_phi)
+    assert bad == 0, "sample disagrees with eval/pdf"
+    integ = _pdf_integral(p, wo, n_cos, n_phi, 12)
+    total = integ.sum()
+    # The pdf integrates to the probability of producing a sample (< 1 where samples
+    # are absorbed, e.g. microfacet reflections that leave below the horizon).
+    assert total <= 1.0 + 2e-3
+    assert h.sum() / n == pytest.approx(total, abs=5e-3)
+    chi2_test(h, integ * n)
+
+
+def test_reflection_is_reciprocal():
+    """f(wo, wi)/|cos_i| == f(wi, wo)/|cos_o| for the reflection lobes."""
+    rng = np.random.default_rng(3)
+    p = params(roughness=0.4, metallic=0.3, clearcoat=0.7, sheen=0.6, anisotropic=0.4)
+    for _ in range(200):
+        a = rng.normal(size=3)
+        b = rng.normal(size=3)
+        a[2] = abs(a[2])
+        b[2] = abs(b[2])
+        wo = tuple(F(x) for x in a / np.linalg.norm(a))
+        wi = tuple(F(x) for x in b / np.linalg.norm(b))
+        f1 = np.array(principled_eval(p, wo, wi)[0]) / wi[2]
+        f2 = np.array(principled_eval(p, wi, wo)[0]) / wo[2]
+        assert np.allclose(f1, f2, rtol=2e-3, atol=1e-6)
