@@ -5,7 +5,8 @@ import pytest
 from numba import njit
 
 from pathtracer.kernels.lights import sample_discrete, sample_triangle_point
-from pathtracer.kernels.materials import diffuse_eval, diffuse_sample
+from pathtracer.kernels.materials import diffuse_eval_local, diffuse_sample_local
+from pathtracer.kernels.vec import frame, to_world
 from pathtracer.kernels.rng import path_key, sample_1d
 from pathtracer.kernels.warps import (power_heuristic, square_to_cosine_hemisphere,
                                       square_to_disk_concentric)
@@ -53,10 +54,12 @@ def _cosine_dirs(u, n):
     out = np.empty((u.shape[0], 3), np.float32)
     pdf = np.empty(u.shape[0], np.float32)
     ng = (n[0], n[1], n[2])
-    m = np.zeros((1, 8), np.float32)
-    m[0, 0] = 1.0
+    t, s = frame(ng)
+    albedo = (np.float32(1), np.float32(1), np.float32(1))
+    up = (np.float32(0), np.float32(0), np.float32(1))
     for i in range(u.shape[0]):
-        wi, w, p = diffuse_sample(m, 0, ng, ng, u[i, 0], u[i, 1])
+        local, w, p = diffuse_sample_local(albedo, up, u[i, 0], u[i, 1])
+        wi = to_world(local, t, s, ng)
         out[i, 0] = wi[0]
         out[i, 1] = wi[1]
         out[i, 2] = wi[2]
@@ -89,12 +92,12 @@ def test_cosine_hemisphere_chi2(normal):
 
 
 def test_diffuse_weight_is_eval_over_pdf():
-    m = np.array([[0.3, 0.6, 0.9, 0, 0, 0, 0, 0]], np.float32)
+    albedo = (np.float32(0.3), np.float32(0.6), np.float32(0.9))
     n = (np.float32(0), np.float32(0), np.float32(1))
     u = _uniforms(1000, 9)
     for u1, u2 in u:
-        wi, weight, pdf = diffuse_sample(m, 0, n, n, u1, u2)
-        f, pdf2 = diffuse_eval(m, 0, n, n, wi)
+        wi, weight, pdf = diffuse_sample_local(albedo, n, u1, u2)
+        f, pdf2 = diffuse_eval_local(albedo, n, wi)
         assert pdf == pytest.approx(pdf2, rel=1e-5)
         assert np.allclose(np.array(f) / pdf, weight, rtol=1e-4)
 

@@ -17,15 +17,24 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .camera import pinhole_ray
-from .constants import INF, OFFSET_REL, ONE, RR_MAX, SHADOW_SHORTEN, ZERO
+from .camera import pinhole_ray, thin_lens_ray
+from .constants import INF, OFFSET_REL, ONE, ONE_MINUS_EPS, RR_MAX, SHADOW_SHORTEN, ZERO
 from .device import device
+from .envmap import env_eval, env_pdf, env_sample
 from .lights import direction_to, sample_discrete, sample_triangle_point
-from .materials import diffuse_eval, diffuse_sample, emission, emits
+from .materials import (M_ANISOTROPIC, M_CLEARCOAT, M_CLEARCOAT_GLOSS, M_ETA, M_METALLIC,
+                        M_ROUGHNESS, M_SHEEN, M_SHEEN_TINT, M_SPEC_TINT, M_SPECULAR,
+                        M_SUBSURFACE, M_TRANSMISSION, M_TYPE, MAT_PRINCIPLED, T_ALBEDO,
+                        T_ANISOTROPIC, T_CLEARCOAT, T_CLEARCOAT_GLOSS, T_EMISSION, T_ETA,
+                        T_METALLIC, T_NORMAL, T_ROUGHNESS, T_SHEEN, T_SHEEN_TINT,
+                        T_SPEC_TINT, T_SPECULAR, T_SUBSURFACE, T_TRANSMISSION,
+                        diffuse_eval_local, diffuse_sample_local, emits)
+from .principled import lum, principled_eval, principled_sample
 from .rng import path_key, sample_1d
+from .textures import tex_lookup
 from .traverse import any_hit, closest_hit
-from .vec import (add, cross, dot, load3, madd, max_abs, max_comp, mul, neg, normalize,
-                  scale)
+from .vec import (add, cross, dot, frame, load3, madd, max_abs, max_comp, mul, neg,
+                  normalize, scale, to_world)
 from .warps import power_heuristic
 
 
@@ -35,17 +44,29 @@ class Features(NamedTuple):
     point_lights: bool
     environment: bool   # constant-colour environment
     smooth: bool        # interpolated vertex normals
+    principled: bool = False   # any principled material
+    textures: bool = False     # any texture (parameters or normal maps)
+    normal_map: bool = False   # any normal map
+    tangents: bool = False     # per-vertex tangents from texture coordinates
+    env_map: bool = False      # an HDRI environment (importance sampled)
+    thin_lens: bool = False    # aperture > 0
 
 
-# Random dimensions: 0-1 pixel position, 2-3 lens (reserved), then per scattering event:
+# Random dimensions: 0-1 pixel position, 2-3 lens, then per scattering event:
 D_LIGHT_SELECT = 0
 D_LIGHT_U = 1
 D_LIGHT_V = 2
 D_BSDF_U = 3
 D_BSDF_V = 4
 D_RR = 5
+D_BSDF_LOBE = 6
 D_FIRST_BOUNCE = 4
 DIMS_PER_BOUNCE = 8
+
+ETA_MIN_TRANSMISSIVE = np.float32(1.001)   # eta = 1 is no interface (as Mitsuba)
+SPEC_K = np.float32(0.08)
+HORIZON_EPS = np.float32(1e-3)
+TWO = np.float32(2.0)
 
 
 class SceneArrays(NamedTuple):
@@ -59,15 +80,34 @@ class SceneArrays(NamedTuple):
     light_cdf: np.ndarray      # float32 (K + 1,)
     light_ref: np.ndarray      # int32 (K,): triangle index, or -(point light index + 1)
     point_lights: np.ndarray   # float32 (P, 6): position, intensity rgb
-    env: np.ndarray            # float32 (3,): environment radiance
+    env: np.ndarray            # float32 (3,): constant environment radiance
     bvh_box: np.ndarray        # float32 (B, 12)
     bvh_child: np.ndarray      # int32 (B, 4)
+    tri_uv: np.ndarray         # float32 (N, 6): uv0, uv1, uv2 (textures only)
+    tri_t: np.ndarray          # float32 (N, 12): tangents t0, t1, t2 + handedness (3)
+    mat_tex: np.ndarray        # int32 (M, N_SLOTS): texture per parameter or -1
+    tex_data: np.ndarray       # float32 (T, 3) linear texels of all textures
+    tex_int: np.ndarray        # int32 (K, 4) see kernels.textures
+    tex_f: np.ndarray          # float32 (K, 7)
+    env_img: np.ndarray        # float32 (H, W, 3) see kernels.envmap
+    env_marg: np.ndarray       # float32 (H + 1,)
+    env_cond: np.ndarray       # float32 (H, W + 1)
+    env_pdf: np.ndarray        # float32 (H, W)
+    env_info: np.ndarray       # float32 (4,)
 
 
 @device
 def offset_origin(p, n):
     """p pushed along n by a few ulps of p's magnitude (scale invariant)."""
     return madd(p, n, max_abs(p) * OFFSET_REL)
+
+
+@device
+def origin_towards(p, ng, w):
+    """Ray origin for leaving p in direction w: offset to w's side of the surface."""
+    if dot(ng, w) >= ZERO:
+        return offset_origin(p, ng)
+    return offset_origin(p, neg(ng))
 
 
 @functools.lru_cache(maxsize=None)
@@ -78,6 +118,117 @@ def make_render_pixel(features):
     ANY_LIGHTS = TRI_LIGHTS or POINT_LIGHTS
     ENVIRONMENT = bool(features.environment)
     SMOOTH = bool(features.smooth)
+    PRINCIPLED = bool(features.principled)
+    TEXTURES = bool(features.textures)
+    NORMAL_MAP = bool(features.normal_map) and TEXTURES
+    TANGENTS = bool(features.tangents)
+    ENV_MAP = bool(features.env_map)
+    THIN_LENS = bool(features.thin_lens)
+    NEE = ANY_LIGHTS or ENV_MAP
+
+    @device
+    def param1(scene, m, slot, col, u, v):
+        """A number parameter of material m, from its texture when it has one."""
+        if TEXTURES:
+            t = scene.mat_tex[m, slot]
+            if t >= 0:
+                r, g, b = tex_lookup(scene.tex_data, scene.tex_int, scene.tex_f, t, u, v)
+                return lum(r, g, b)
+        return scene.mat[m, col]
+
+    @device
+    def param3(scene, m, slot, col, u, v):
+        if TEXTURES:
+            t = scene.mat_tex[m, slot]
+            if t >= 0:
+                return tex_lookup(scene.tex_data, scene.tex_int, scene.tex_f, t, u, v)
+        return scene.mat[m, col], scene.mat[m, col + 1], scene.mat[m, col + 2]
+
+    @device
+    def unit(x):
+        return min(max(x, ZERO), ONE)
+
+    @device
+    def tri_uv_at(scene, tri, b1, b2):
+        if TEXTURES:
+            b0 = ONE - b1 - b2
+            return (b0 * scene.tri_uv[tri, 0] + b1 * scene.tri_uv[tri, 2] +
+                    b2 * scene.tri_uv[tri, 4],
+                    b0 * scene.tri_uv[tri, 1] + b1 * scene.tri_uv[tri, 3] +
+                    b2 * scene.tri_uv[tri, 5])
+        return ZERO, ZERO
+
+    @device
+    def emitted(scene, m, u, v):
+        return param3(scene, m, T_EMISSION, 3, u, v)
+
+    @device
+    def material_params(scene, m, u, v):
+        """The principled parameter tuple of material m at texture coordinates (u, v)."""
+        base = param3(scene, m, T_ALBEDO, 0, u, v)
+        transmission = unit(param1(scene, m, T_TRANSMISSION, M_TRANSMISSION, u, v))
+        eta = param1(scene, m, T_ETA, M_ETA, u, v)
+        if not (eta > ZERO):
+            spec = unit(param1(scene, m, T_SPECULAR, M_SPECULAR, u, v))
+            eta = TWO / (ONE - math.sqrt(SPEC_K * spec)) - ONE
+        if transmission > ZERO and eta == ONE:
+            eta = ETA_MIN_TRANSMISSIVE
+        return (max(base[0], ZERO), max(base[1], ZERO), max(base[2], ZERO),
+                unit(param1(scene, m, T_ROUGHNESS, M_ROUGHNESS, u, v)),
+                unit(param1(scene, m, T_METALLIC, M_METALLIC, u, v)),
+                eta,
+                unit(param1(scene, m, T_SPEC_TINT, M_SPEC_TINT, u, v)),
+                unit(param1(scene, m, T_ANISOTROPIC, M_ANISOTROPIC, u, v)),
+                unit(param1(scene, m, T_SHEEN, M_SHEEN, u, v)),
+                unit(param1(scene, m, T_SHEEN_TINT, M_SHEEN_TINT, u, v)),
+                unit(param1(scene, m, T_CLEARCOAT, M_CLEARCOAT, u, v)),
+                unit(param1(scene, m, T_CLEARCOAT_GLOSS, M_CLEARCOAT_GLOSS, u, v)),
+                unit(param1(scene, m, T_SUBSURFACE, M_SUBSURFACE, u, v)),
+                transmission)
+
+    @device
+    def bsdf_eval(is_principled, p, wo_l, wi_l):
+        if PRINCIPLED:
+            if is_principled:
+                return principled_eval(p, wo_l, wi_l)
+        return diffuse_eval_local((p[0], p[1], p[2]), wo_l, wi_l)
+
+    @device
+    def bsdf_sample(is_principled, p, wo_l, u_lobe, u1, u2):
+        if PRINCIPLED:
+            if is_principled:
+                return principled_sample(p, wo_l, u_lobe, u1, u2)
+        return diffuse_sample_local((p[0], p[1], p[2]), wo_l, u1, u2)
+
+    @device
+    def to_local(w, t, s, n):
+        return (dot(w, t), dot(w, s), dot(w, n))
+
+    @device
+    def eval_world(is_principled, p, wo, wo_l, wi, t, s, n, ng):
+        """BSDF * |cos| and pdf for world direction wi; 0 where the geometric surface
+        disagrees with the shading frame (no light leaks through a surface)."""
+        wi_l = to_local(wi, t, s, n)
+        if (wo_l[2] * wi_l[2] > ZERO) != (dot(ng, wo) * dot(ng, wi) > ZERO):
+            return (ZERO, ZERO, ZERO), ZERO
+        return bsdf_eval(is_principled, p, wo_l, wi_l)
+
+    @device
+    def light_barycentrics(scene, ref, q):
+        """Barycentric (b1, b2) of point q on triangle ref."""
+        v0 = load3(scene.tri_v, ref, 0)
+        e1 = load3(scene.tri_v, ref, 3)
+        e2 = load3(scene.tri_v, ref, 6)
+        w = (q[0] - v0[0], q[1] - v0[1], q[2] - v0[2])
+        d11 = dot(e1, e1)
+        d12 = dot(e1, e2)
+        d22 = dot(e2, e2)
+        dw1 = dot(w, e1)
+        dw2 = dot(w, e2)
+        den = d11 * d22 - d12 * d12
+        if not (den > ZERO):
+            return ZERO, ZERO
+        return (d22 * dw1 - d12 * dw2) / den, (d11 * dw2 - d12 * dw1) / den
 
     @device
     def render_sample(px, py, sample_index, seed, width, height, max_bounces, rr_depth,
@@ -85,8 +236,13 @@ def make_render_pixel(features):
         """Radiance (r, g, b) of one camera path through pixel (px, py), with the number of
         bounce rays and shadow rays it traced."""
         key = path_key(py * width + px, sample_index, seed)
-        o, d = pinhole_ray(scene.cam, np.float32(px), np.float32(py), sample_1d(key, 0),
-                           sample_1d(key, 1), np.float32(width), np.float32(height))
+        if THIN_LENS:
+            o, d = thin_lens_ray(scene.cam, np.float32(px), np.float32(py),
+                                 sample_1d(key, 0), sample_1d(key, 1), sample_1d(key, 2),
+                                 sample_1d(key, 3), np.float32(width), np.float32(height))
+        else:
+            o, d = pinhole_ray(scene.cam, np.float32(px), np.float32(py), sample_1d(key, 0),
+                               sample_1d(key, 1), np.float32(width), np.float32(height))
         beta = (ONE, ONE, ONE)      # path throughput: product of f cos / pdf (and 1/q of RR)
         radiance = (ZERO, ZERO, ZERO)
         pdf_prev = ZERO             # solid-angle pdf of the BSDF sample that made this ray;
@@ -95,11 +251,21 @@ def make_render_pixel(features):
         bounce = 0                  # scattering events so far
         n_bounce_rays = 0
         n_shadow_rays = 0
+        p_env = ZERO
+        if ENV_MAP:
+            p_env = scene.env_info[2]
         while True:
             t, tri, b1, b2 = closest_hit(o, d, INF, skip, scene.tri_v, scene.bvh_box,
                                          scene.bvh_child, stack)
             if tri < 0:
-                if ENVIRONMENT:
+                if ENV_MAP:
+                    le = env_eval(scene.env_img, scene.env_info, d)
+                    weight = ONE
+                    if pdf_prev > ZERO:
+                        weight = power_heuristic(
+                            pdf_prev, p_env * env_pdf(scene.env_pdf, scene.env_info, d))
+                    radiance = add(radiance, scale(mul(beta, le), weight))
+                elif ENVIRONMENT:
                     # Constant environment: reached only by BSDF sampling (weight 1).
                     radiance = add(radiance, mul(beta, (scene.env[0], scene.env[1],
                                                         scene.env[2])))
@@ -114,6 +280,7 @@ def make_render_pixel(features):
             wo = neg(d)
             cos_o = dot(ng, wo)
             m = scene.tri_mat[tri]
+            tu, tv = tri_uv_at(scene, tri, b1, b2)
 
             # ---- Emission reached by this ray (MIS against light sampling) ----
             if TRI_LIGHTS:
@@ -122,72 +289,179 @@ def make_render_pixel(features):
                     if pdf_prev > ZERO:
                         pdf_light = scene.tri_light_pdf[tri] * t * t / abs(cos_o)
                         weight = power_heuristic(pdf_prev, pdf_light)
-                    radiance = add(radiance, scale(mul(beta, emission(scene.mat, m)), weight))
+                    radiance = add(radiance, scale(mul(beta, emitted(scene, m, tu, tv)),
+                                                   weight))
 
             if bounce >= max_bounces:
                 break
 
-            # Both sides of a surface reflect: turn the normals to the side of wo.
-            if cos_o < ZERO:
-                ng = neg(ng)
-            n = ng
+            # ---- Material and shading frame ----
+            is_principled = False
+            if PRINCIPLED:
+                is_principled = scene.mat[m, M_TYPE] == MAT_PRINCIPLED
+            if PRINCIPLED and is_principled:
+                bp = material_params(scene, m, tu, tv)
+            else:
+                alb = param3(scene, m, T_ALBEDO, 0, tu, tv)
+                bp = (alb[0], alb[1], alb[2], ZERO, ZERO, ONE, ZERO, ZERO, ZERO, ZERO,
+                      ZERO, ZERO, ZERO, ZERO)
+            # A transmissive material is an interface with an inside: its frame keeps the
+            # geometric front side. Anything else reflects on both sides: turn to wo.
+            side = ONE
+            if cos_o < ZERO and not (bp[13] > ZERO):
+                side = -ONE
+            ns = ng
             if SMOOTH:
                 b0 = ONE - b1 - b2
                 ns = normalize(add(add(scale(load3(scene.tri_n, tri, 0), b0),
                                        scale(load3(scene.tri_n, tri, 3), b1)),
                                    scale(load3(scene.tri_n, tri, 6), b2)))
-                n = ns if dot(ns, ng) >= ZERO else neg(ns)
-            origin = offset_origin(p, ng)
+                if dot(ns, ng) < ZERO:
+                    ns = neg(ns)
+            tangent = (ZERO, ZERO, ZERO)
+            has_tangent = False
+            if TANGENTS:
+                b0 = ONE - b1 - b2
+                tt = add(add(scale(load3(scene.tri_t, tri, 0), b0),
+                             scale(load3(scene.tri_t, tri, 3), b1)),
+                         scale(load3(scene.tri_t, tri, 6), b2))
+                tt = madd(tt, ns, -dot(tt, ns))
+                if dot(tt, tt) > ZERO:
+                    tangent = normalize(tt)
+                    has_tangent = True
+            if NORMAL_MAP:
+                tn = scene.mat_tex[m, T_NORMAL]
+                if tn >= 0 and has_tangent:
+                    c = tex_lookup(scene.tex_data, scene.tex_int, scene.tex_f, tn, tu, tv)
+                    # OpenGL convention: +Y (green) along the bitangent n x t (times the
+                    # handedness of the UV mapping).
+                    bt = scale(cross(ns, tangent), scene.tri_t[tri, 9])
+                    mx = TWO * c[0] - ONE
+                    my = TWO * c[1] - ONE
+                    mz = TWO * c[2] - ONE
+                    nm = add(add(scale(tangent, mx), scale(bt, my)), scale(ns, mz))
+                    if dot(nm, nm) > ZERO:
+                        ns = normalize(nm)
+                        tangent = madd(tangent, ns, -dot(tangent, ns))
+                        if dot(tangent, tangent) > ZERO:
+                            tangent = normalize(tangent)
+                        else:
+                            has_tangent = False
+            if side < ZERO:
+                ng = neg(ng)
+                ns = neg(ns)
+            # A shading normal that puts wo below its horizon (normal maps, coarse meshes)
+            # is bent towards wo just enough to see it: otherwise a lit surface turns black.
+            s_o = ONE if dot(ng, wo) >= ZERO else -ONE
+            c_o = dot(ns, wo) * s_o
+            if c_o < HORIZON_EPS:
+                ns = normalize(madd(ns, wo, s_o * (HORIZON_EPS - c_o)))
+            if has_tangent:
+                tangent = madd(tangent, ns, -dot(tangent, ns))
+                if dot(tangent, tangent) > ZERO:
+                    tangent = normalize(tangent)
+                else:
+                    tangent, _ = frame(ns)
+            else:
+                # Mitsuba's choice without texture coordinates: the geometric frame's
+                # tangent, projected onto the shading normal.
+                tg, _ = frame(ng)
+                tangent = madd(tg, ns, -dot(tg, ns))
+                if dot(tangent, tangent) > ZERO:
+                    tangent = normalize(tangent)
+                else:
+                    tangent, _ = frame(ns)
+            bitangent = cross(ns, tangent)
+            wo_l = to_local(wo, tangent, bitangent, ns)
             dim = D_FIRST_BOUNCE + bounce * DIMS_PER_BOUNCE
 
-            # ---- Next-event estimation: one light, chosen by power ----
-            if ANY_LIGHTS:
-                k = sample_discrete(scene.light_cdf, sample_1d(key, dim + D_LIGHT_SELECT))
-                ref = scene.light_ref[k]
+            # ---- Next-event estimation: the environment, or one light chosen by power ----
+            if NEE:
+                u_sel = sample_1d(key, dim + D_LIGHT_SELECT)
                 u1 = sample_1d(key, dim + D_LIGHT_U)
                 u2 = sample_1d(key, dim + D_LIGHT_V)
-                if TRI_LIGHTS and ref >= 0:
-                    q, nl, _ = sample_triangle_point(scene.tri_v, ref, u1, u2)
-                    wi, dist = direction_to(p, q)
-                    cos_l = -dot(nl, wi)
-                    lm = scene.tri_mat[ref]
-                    # tri_light_pdf = selection pmf / area: the same density the
-                    # emission-hit MIS above uses (0 for zero-area triangles).
-                    pdf_area = scene.tri_light_pdf[ref]
-                    if dist > ZERO and pdf_area > ZERO and emits(scene.mat, lm, cos_l):
-                        f, pdf_bsdf = diffuse_eval(scene.mat, m, n, ng, wi)
-                        if pdf_bsdf > ZERO:
+                pick_env = False
+                if ENV_MAP:
+                    if u_sel < p_env:
+                        pick_env = True
+                    else:
+                        u_sel = min((u_sel - p_env) / (ONE - p_env), ONE_MINUS_EPS)
+                if ENV_MAP and pick_env:
+                    wi, pdf_dir = env_sample(scene.env_marg, scene.env_cond, scene.env_pdf,
+                                             scene.env_info, u1, u2)
+                    if pdf_dir > ZERO:
+                        f, pdf_bsdf = eval_world(is_principled, bp, wo, wo_l, wi, tangent,
+                                                 bitangent, ns, ng)
+                        if max_comp(f) > ZERO:
                             n_shadow_rays += 1
-                            if not any_hit(origin, wi, dist * SHADOW_SHORTEN, tri, ref,
-                                           scene.tri_v, scene.bvh_box, scene.bvh_child, stack):
-                                pdf_light = pdf_area * dist * dist / abs(cos_l)
+                            if not any_hit(origin_towards(p, ng, wi), wi, INF, tri, -1,
+                                           scene.tri_v, scene.bvh_box, scene.bvh_child,
+                                           stack):
+                                pdf_light = p_env * pdf_dir
                                 weight = power_heuristic(pdf_light, pdf_bsdf) / pdf_light
-                                radiance = add(radiance, scale(
-                                    mul(mul(beta, f), emission(scene.mat, lm)), weight))
-                if POINT_LIGHTS and ref < 0:
-                    pl = -ref - 1
-                    pmf = scene.light_cdf[k + 1] - scene.light_cdf[k]
-                    wi, dist = direction_to(p, load3(scene.point_lights, pl, 0))
-                    if dist > ZERO:
-                        f, pdf_bsdf = diffuse_eval(scene.mat, m, n, ng, wi)
-                        if pdf_bsdf > ZERO:
-                            n_shadow_rays += 1
-                            if not any_hit(origin, wi, dist * SHADOW_SHORTEN, tri, -1,
-                                           scene.tri_v, scene.bvh_box, scene.bvh_child, stack):
-                                # Delta light: no MIS; irradiance falls off with 1/d^2.
-                                radiance = add(radiance, scale(
-                                    mul(mul(beta, f), load3(scene.point_lights, pl, 3)),
-                                    ONE / (pmf * dist * dist)))
+                                le = env_eval(scene.env_img, scene.env_info, wi)
+                                radiance = add(radiance, scale(mul(mul(beta, f), le), weight))
+                elif ANY_LIGHTS:
+                    k = sample_discrete(scene.light_cdf, u_sel)
+                    ref = scene.light_ref[k]
+                    if TRI_LIGHTS and ref >= 0:
+                        q, nl, _ = sample_triangle_point(scene.tri_v, ref, u1, u2)
+                        wi, dist = direction_to(p, q)
+                        cos_l = -dot(nl, wi)
+                        lm = scene.tri_mat[ref]
+                        # tri_light_pdf = selection pmf / area: the same density the
+                        # emission-hit MIS above uses (0 for zero-area triangles).
+                        pdf_area = scene.tri_light_pdf[ref]
+                        if dist > ZERO and pdf_area > ZERO and emits(scene.mat, lm, cos_l):
+                            f, pdf_bsdf = eval_world(is_principled, bp, wo, wo_l, wi,
+                                                     tangent, bitangent, ns, ng)
+                            if max_comp(f) > ZERO:
+                                n_shadow_rays += 1
+                                if not any_hit(origin_towards(p, ng, wi), wi,
+                                               dist * SHADOW_SHORTEN, tri, ref, scene.tri_v,
+                                               scene.bvh_box, scene.bvh_child, stack):
+                                    pdf_light = pdf_area * dist * dist / abs(cos_l)
+                                    weight = power_heuristic(pdf_light, pdf_bsdf) / pdf_light
+                                    lu, lv = ZERO, ZERO
+                                    if TEXTURES:
+                                        # texture coordinates of the light sample point
+                                        lb1, lb2 = light_barycentrics(scene, ref, q)
+                                        lu, lv = tri_uv_at(scene, ref, lb1, lb2)
+                                    radiance = add(radiance, scale(
+                                        mul(mul(beta, f), emitted(scene, lm, lu, lv)),
+                                        weight))
+                    if POINT_LIGHTS and ref < 0:
+                        pl = -ref - 1
+                        pmf = scene.light_cdf[k + 1] - scene.light_cdf[k]
+                        if ENV_MAP:
+                            pmf *= ONE - p_env
+                        wi, dist = direction_to(p, load3(scene.point_lights, pl, 0))
+                        if dist > ZERO:
+                            f, pdf_bsdf = eval_world(is_principled, bp, wo, wo_l, wi,
+                                                     tangent, bitangent, ns, ng)
+                            if max_comp(f) > ZERO:
+                                n_shadow_rays += 1
+                                if not any_hit(origin_towards(p, ng, wi), wi,
+                                               dist * SHADOW_SHORTEN, tri, -1, scene.tri_v,
+                                               scene.bvh_box, scene.bvh_child, stack):
+                                    # Delta light: no MIS; irradiance falls off with 1/d^2.
+                                    radiance = add(radiance, scale(
+                                        mul(mul(beta, f), load3(scene.point_lights, pl, 3)),
+                                        ONE / (pmf * dist * dist)))
 
             # ---- BSDF sampling: the next ray ----
-            wi, weight, pdf_bsdf = diffuse_sample(scene.mat, m, n, ng,
-                                                  sample_1d(key, dim + D_BSDF_U),
-                                                  sample_1d(key, dim + D_BSDF_V))
-            if pdf_bsdf <= ZERO:
+            wi_l, weight, pdf_bsdf = bsdf_sample(is_principled, bp, wo_l,
+                                                 sample_1d(key, dim + D_BSDF_LOBE),
+                                                 sample_1d(key, dim + D_BSDF_U),
+                                                 sample_1d(key, dim + D_BSDF_V))
+            if not (pdf_bsdf > ZERO):
                 break
+            wi = normalize(to_world(wi_l, tangent, bitangent, ns))
+            if (wo_l[2] * wi_l[2] > ZERO) != (dot(ng, wo) * dot(ng, wi) > ZERO):
+                break   # the shading frame and the surface disagree: absorbed
             beta = mul(beta, weight)
             pdf_prev = pdf_bsdf
-            o = origin
+            o = origin_towards(p, ng, wi)
             d = wi
             skip = tri
             bounce += 1

@@ -16,7 +16,7 @@ import numpy as np
 
 from .errors import SceneError
 
-NOT_YET = "is not supported yet (planned: principled BSDF, textures, HDRI, thin lens)"
+NOT_YET = "is not supported yet"
 
 
 # ---------------------------------------------------------------------------------------
@@ -32,6 +32,7 @@ class Camera:
     fov: float = 39.6                   # horizontal, degrees
     aperture: float = 0.0
     focus_distance: float = 1.0
+    lens_radius: float = 0.0
 
 
 @dataclass
@@ -43,13 +44,37 @@ class RenderSettings:
 
 
 @dataclass
+class TextureSpec:
+    path: str
+    color_space: str = "linear"      # "sRGB" or "linear"
+    filter: str = "bilinear"         # or "nearest"
+    tile: tuple = (1.0, 1.0)
+    offset: tuple = (0.0, 0.0)
+    scale: tuple = (1.0, 1.0, 1.0)
+    pointer: str = ""
+
+
+# principled number parameters: scene key -> (default, lo, hi)
+PRINCIPLED_NUMBERS = {
+    "roughness": (0.5, 0.0, 1.0), "metallic": (0.0, 0.0, 1.0), "specular": (0.5, 0.0, 1.0),
+    "specularTint": (0.0, 0.0, 1.0), "anisotropic": (0.0, 0.0, 1.0),
+    "sheen": (0.0, 0.0, 1.0), "sheenTint": (0.0, 0.0, 1.0), "clearcoat": (0.0, 0.0, 1.0),
+    "clearcoatGloss": (0.0, 0.0, 1.0), "subsurface": (0.0, 0.0, 1.0),
+    "transmission": (0.0, 0.0, 1.0), "eta": (None, 0.0, None),
+}
+
+
+@dataclass
 class Material:
     name: str
-    type: str = "diffuse"
+    type: str = "principled"
     albedo: tuple = (0.5, 0.5, 0.5)
     emission: tuple = (0.0, 0.0, 0.0)
     two_sided: bool = False
     pointer: str = ""
+    numbers: dict = field(default_factory=dict)    # principled number parameters
+    textures: dict = field(default_factory=dict)   # parameter key -> TextureSpec
+    normal_map: Optional[TextureSpec] = None
 
 
 @dataclass
@@ -71,6 +96,14 @@ class PointLight:
 
 
 @dataclass
+class EnvironmentMap:
+    path: Optional[str]        # None: the file is missing and defaults were asked for
+    intensity: float = 1.0
+    rotation: float = 0.0      # degrees about +Y
+    pointer: str = ""
+
+
+@dataclass
 class SceneDescription:
     path: str
     camera: Camera
@@ -78,7 +111,9 @@ class SceneDescription:
     materials: dict            # name -> Material
     objects: list
     point_lights: list
-    environment: Optional[tuple] = None   # constant radiance rgb, or None (black)
+    environment: object = None   # constant radiance rgb tuple, EnvironmentMap, or None
+    exposure: float = 1.0        # thesis folders: linear scale of the image
+    warnings: list = field(default_factory=list)
 
 
 # ---------------------------------------------------------------------------------------
@@ -157,7 +192,7 @@ class Node:
             return default
         v = self.raw(key)
         if isinstance(v, (str, dict)) and (isinstance(v, str) or "texture" in v):
-            raise SceneError(f"textures {NOT_YET}", self.file, self.path(key))
+            raise SceneError("a texture is not allowed here", self.file, self.path(key))
         c = _triple(v, self.file, self.path(key), None, True)
         for i, x in enumerate(c):
             if x < 0:
@@ -249,9 +284,6 @@ def _strict_json(path):
             text = f.read()
     except FileNotFoundError:
         raise SceneError("scene file not found", path) from None
-    except IsADirectoryError:
-        raise SceneError("is a folder; scene folders in the thesis layout " + NOT_YET,
-                         path) from None
     except (OSError, UnicodeDecodeError) as e:
         raise SceneError(f"cannot read: {e}", path) from None
     try:
@@ -269,10 +301,27 @@ def _strict_json(path):
         raise SceneError(f"invalid JSON{where}: {e}", path) from None
 
 
-def load_scene_description(path):
-    """Parse and validate ``path``; raises :class:`SceneError` on any bad input."""
+def load_scene_description(path, allow_missing=False):
+    """Parse and validate ``path`` (a scene file, or a thesis renderer's scene folder);
+    raises :class:`SceneError` on any bad input."""
+    from .thesis import convert, is_thesis_folder, is_thesis_scene_file
     path = os.path.abspath(path)
-    root = Node(_strict_json(path), "", path)
+    warnings = []
+    if os.path.isdir(path) or is_thesis_scene_file(path):
+        folder = path if os.path.isdir(path) else os.path.dirname(path)
+        if not is_thesis_folder(folder):
+            raise SceneError("is a folder without a scene.json (expected a scene file or a "
+                             "thesis renderer scene folder)", path)
+        data, path, warnings = convert(folder, allow_missing)
+    else:
+        data = _strict_json(path)
+    desc = _describe(data, path)
+    desc.warnings.extend(warnings)
+    return desc
+
+
+def _describe(data, path):
+    root = Node(data, "", path)
     base = os.path.dirname(path)
     if not root.has("camera"):
         raise root.error("missing required key 'camera'")
@@ -280,7 +329,7 @@ def load_scene_description(path):
     render = _render(root.node("render")) if root.has("render") else RenderSettings()
     materials = {}
     for i, m in enumerate(root.items("materials")):
-        mat = _material(Node(m, f"/materials/{i}", path))
+        mat = _material(Node(m, f"/materials/{i}", path), base)
         if mat.name in materials:
             raise SceneError(f"duplicate material name {mat.name!r}", path, f"/materials/{i}/name")
         materials[mat.name] = mat
@@ -300,16 +349,16 @@ def load_scene_description(path):
         n.finish()
     environment = None
     if root.has("environment"):
-        environment = _environment(root.node("environment"))
+        environment = _environment(root.node("environment"), base)
     if root.has("hdri"):                                # thesis alias
         if root.has("environment"):
             raise root.error("give 'environment' or 'hdri', not both", "hdri")
-        environment = _environment(root.node("hdri"), thesis=True)
+        environment = _environment(root.node("hdri"), base, thesis=True)
     root.finish()
     return SceneDescription(path, camera, render, materials, objects, lights, environment)
 
 
-def _camera(n):
+def _camera(n, sensor_default=0.036):
     cam = Camera()
     if n.has("resolution"):
         if n.has("xRes") or n.has("yRes"):
@@ -335,7 +384,7 @@ def _camera(n):
         if np.linalg.norm(np.cross(fwd, cam.up)) <= 1e-12 * np.linalg.norm(fwd) * max(
                 np.linalg.norm(cam.up), 1e-300):
             raise n.error("up is parallel to the viewing direction (or zero)", "up")
-    sensor_width = n.number("sensorWidth", 0.036, lo=0, lo_open=True)
+    sensor_width = n.number("sensorWidth", sensor_default, lo=0, lo_open=True)
     if n.has("focalLength"):
         if n.has("fov"):
             raise n.error("give 'fov' or 'focalLength', not both", "focalLength")
@@ -345,10 +394,11 @@ def _camera(n):
         cam.fov = n.number("fov", cam.fov, lo=0, lo_open=True)
         if cam.fov >= 180:
             raise n.error(f"must be < 180 degrees, got {cam.fov}", "fov")
+        focal = sensor_width / (2 * math.tan(math.radians(cam.fov) / 2))
     cam.aperture = n.number("aperture", 0.0, lo=0)
     cam.focus_distance = n.number("focusDistance", 1.0, lo=0, lo_open=True)
-    if cam.aperture > 0:
-        raise n.error(f"the thin-lens camera (aperture > 0) {NOT_YET}", "aperture")
+    # f-number -> lens radius (scene units: focalLength and sensorWidth are metres)
+    cam.lens_radius = focal / (2 * cam.aperture) if cam.aperture > 0 else 0.0
     n.finish()
     return cam
 
@@ -370,24 +420,98 @@ def _render(n):
     return r
 
 
-def _material(n):
+def _material(n, base):
     name = n.string("name")
     if name is None:
         raise n.error("missing required key 'name'")
     mtype = n.string("type", "principled", choices=("principled", "diffuse"))
-    if mtype == "principled":
-        raise n.error(f"material type 'principled' (the default type) {NOT_YET}; "
-                      "use \"type\": \"diffuse\" for now", "type" if n.has("type") else None)
     if n.has("albedo") and n.has("baseColor"):
         raise n.error("give 'albedo' or 'baseColor', not both", "baseColor")
-    albedo = n.color("albedo", None)
-    if albedo is None:
-        albedo = n.color("baseColor", (0.5, 0.5, 0.5))
-    m = Material(name=name, type=mtype, albedo=albedo,
-                 emission=n.color("emission", (0.0, 0.0, 0.0)),
-                 two_sided=n.boolean("twoSided", False), pointer=n.pointer)
+    m = Material(name=name, type=mtype, pointer=n.pointer)
+    key = "albedo" if n.has("albedo") or not n.has("baseColor") else "baseColor"
+    m.albedo = _color_or_texture(n, key, (0.5, 0.5, 0.5), base, "sRGB", m, "albedo")
+    m.emission = _color_or_texture(n, "emission", (0.0, 0.0, 0.0), base, "sRGB", m,
+                                   "emission")
+    m.two_sided = n.boolean("twoSided", False)
+    if mtype == "principled":
+        if n.has("eta") and n.has("specular"):
+            raise n.error("give 'specular' or 'eta', not both (each sets the other)", "eta")
+        for k, (default, lo, hi) in PRINCIPLED_NUMBERS.items():
+            if not n.has(k):
+                if default is not None:
+                    m.numbers[k] = default
+                continue
+            v = n.raw(k)
+            if isinstance(v, (str, dict)):
+                m.textures[k] = _texture_spec(n, k, base, "linear")
+                m.numbers[k] = default if default is not None else 0.0
+            else:
+                m.numbers[k] = n.number(k, lo=lo, hi=hi, lo_open=(k == "eta"))
+        if n.has("normalMap"):
+            m.normal_map = _texture_spec(n, "normalMap", base, "linear")
+    else:
+        for k in list(PRINCIPLED_NUMBERS) + ["normalMap"]:
+            if n.has(k):
+                raise n.error(f"'{k}' belongs to the principled material, not 'diffuse'", k)
     n.finish()
     return m
+
+
+def _color_or_texture(n, key, default, base, color_space, material, slot):
+    if not n.has(key):
+        return default
+    v = n.raw(key)
+    if isinstance(v, str) or (isinstance(v, dict) and "texture" in v):
+        material.textures[slot] = _texture_spec(n, key, base, color_space)
+        return (1.0, 1.0, 1.0)
+    return n.color(key, default)
+
+
+TEXTURE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".hdr", ".exr", ".tga", ".tif",
+                      ".tiff")
+
+
+def _texture_spec(n, key, base, color_space):
+    """A texture: a path string, or {texture, colorSpace, filter, tile, offset, scale}."""
+    v = n.raw(key)
+    where = n.path(key)
+    if isinstance(v, str):
+        spec = TextureSpec(path=_texture_path(v, base, n.file, where), color_space=color_space,
+                           pointer=where)
+    else:
+        t = Node(v, where, n.file)
+        p = t.string("texture")
+        spec = TextureSpec(path=_texture_path(p, base, n.file, t.path("texture")),
+                           color_space=t.string("colorSpace", color_space,
+                                                choices=("sRGB", "linear")),
+                           filter=t.string("filter", "bilinear",
+                                           choices=("bilinear", "nearest")),
+                           pointer=where)
+        spec.tile = _pair(t, "tile", (1.0, 1.0))
+        spec.offset = _pair(t, "offset", (0.0, 0.0))
+        if t.has("scale"):
+            spec.scale = _triple(t.raw("scale"), t.file, t.path("scale"), None, True)
+        t.finish()
+    return spec
+
+
+def _texture_path(p, base, file, where):
+    path = os.path.join(base, p)
+    if not os.path.splitext(path)[1].lower() in TEXTURE_EXTENSIONS:
+        raise SceneError(f"unsupported texture format {os.path.splitext(p)[1]!r} "
+                         f"(use one of {', '.join(TEXTURE_EXTENSIONS)})", file, where)
+    if not os.path.isfile(path):
+        raise SceneError(f"texture file not found: {path}", file, where)
+    return path
+
+
+def _pair(n, key, default):
+    if not n.has(key):
+        return default
+    v = n.raw(key)
+    if not isinstance(v, list) or len(v) != 2:
+        raise n.error("expected [u, v]", key)
+    return tuple(_number(x, n.file, f"{n.path(key)}/{i}") for i, x in enumerate(v))
 
 
 def _object(n, base, materials):
@@ -491,19 +615,32 @@ def _point_light(n):
     return light
 
 
-def _environment(n, thesis=False):
+def _environment(n, base, thesis=False):
     file_key = "name" if thesis else "file"
-    if n.has(file_key):
-        raise n.error(f"environment maps (HDRI files) {NOT_YET}", file_key)
+    if n.has(file_key) and n.has("color"):
+        raise n.error(f"give 'color' or '{file_key}', not both", "color")
+    rotation = 0.0
     if thesis:
-        for k in ("xOffset", "yOffset"):
-            n.number(k, 0.0)
+        # The thesis renderer shifted the map by xOffset of its width; its yOffset never
+        # worked (it was written into xOffset), so only 0 is accepted.
+        x_off = n.number("xOffset", 0.0)
+        if n.number("yOffset", 0.0) != 0.0:
+            raise n.error("yOffset is not supported (the thesis renderer ignored it too); "
+                          "use 0", "yOffset")
+        # Its mapping, expressed in ours (after its z flip), is turned by a quarter turn.
+        rotation = 360.0 * (x_off - 0.25)
     else:
-        if n.has("rotation"):
-            n.number("rotation")
-    if not n.has("color"):
-        raise n.error(f"needs 'color' (or '{file_key}')")
-    color = n.color("color")
+        rotation = n.number("rotation", 0.0)
     intensity = n.number("intensity", 1.0, lo=0)
+    if n.has(file_key):
+        name = n.string(file_key)
+        path = os.path.join(base, "HDRI", name + ".hdr") if thesis else os.path.join(base, name)
+        n.finish()
+        if not os.path.isfile(path):
+            raise n.error(f"environment map not found: {path}", file_key)
+        return EnvironmentMap(path, intensity, rotation, n.path(file_key))
+    if not n.has("color"):
+        raise n.error(f"needs 'color' or '{file_key}'")
+    color = n.color("color")
     n.finish()
     return tuple(c * intensity for c in color)

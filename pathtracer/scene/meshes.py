@@ -18,15 +18,16 @@ import numpy as np
 
 from .errors import SceneError
 
-CACHE_VERSION = 2
+CACHE_VERSION = 3
 
 
 @dataclass
 class ObjMesh:
     positions: np.ndarray          # float32 (F, 3, 3)
     normals: Optional[np.ndarray]  # float32 (F, 3, 3) from `vn`, or None
+    uvs: Optional[np.ndarray]      # float32 (F, 3, 2) from `vt`, or None
     face_material: np.ndarray      # int32 (F,): index into materials, -1 = no material
-    materials: list                # dicts: name, Kd, Ke, Ks, Ns, Ni, map_Kd, map_Bump
+    materials: list                # dicts: name, Kd, Ke, Ks, Ns, Ni, Pr, Pm, map_Kd, map_Bump
     from_cache: bool = False
 
 
@@ -72,7 +73,8 @@ def load_obj(path, use_cache=True):
 def _read_cache(cpath):
     with np.load(cpath, allow_pickle=False) as z:
         normals = z["normals"] if z["has_normals"] else None
-        return ObjMesh(z["positions"], normals, z["face_material"],
+        uvs = z["uvs"] if z["has_uvs"] else None
+        return ObjMesh(z["positions"], normals, uvs, z["face_material"],
                        json.loads(str(z["materials"])), from_cache=True)
 
 
@@ -85,6 +87,8 @@ def _write_cache(cpath, mesh):
                      normals=mesh.normals if mesh.normals is not None else np.zeros((0, 3, 3),
                                                                                     np.float32),
                      has_normals=mesh.normals is not None, face_material=mesh.face_material,
+                     uvs=mesh.uvs if mesh.uvs is not None else np.zeros((0, 3, 2), np.float32),
+                     has_uvs=mesh.uvs is not None,
                      materials=json.dumps(mesh.materials))
         os.replace(tmp, cpath)
     except OSError as e:   # a read-only cache folder only costs speed
@@ -107,8 +111,10 @@ def _parse(path):
     for m in scene.mesh_list:
         if m.faces and min(min(f) for f in m.faces) < 0:
             raise SceneError("a face refers to a vertex index that is out of range", path)
-    positions, normals, face_mat, materials = [], [], [], []
+    positions, normals, uvs, face_mat, materials = [], [], [], [], []
     all_have_normals = True
+    all_have_uvs = True
+    extra = _mtl_extras(path)
     for mat in scene.materials.values():
         if not mat.vertices:
             continue
@@ -128,6 +134,11 @@ def _parse(path):
             normals.append(v[:, o:o + 3].reshape(-1, 3, 3))
         else:
             all_have_normals = False
+        if "T2F" in offsets:
+            o = offsets["T2F"]
+            uvs.append(v[:, o:o + 2].reshape(-1, 3, 2))
+        else:
+            all_have_uvs = False
         # pywavefront names faces without `usemtl` "default<N>"; those get no material.
         index = -1 if (mat.is_default and re.fullmatch(r"default\d+", mat.name)) else len(materials)
         if index >= 0:
@@ -138,11 +149,47 @@ def _parse(path):
                 "name": mat.name, "Kd": list(mat.diffuse[:3]), "Ke": list(mat.emissive[:3]),
                 "Ks": list(mat.specular[:3]), "Ns": float(mat.shininess),
                 "Ni": float(mat.optical_density),
+                "Pr": extra.get(mat.name, {}).get("Pr"), "Pm": extra.get(mat.name, {}).get("Pm"),
                 "map_Kd": mat.texture.path if mat.texture else None,
-                "map_Bump": mat.texture_bump.path if mat.texture_bump else None})
+                "map_Bump": (mat.texture_bump.path if mat.texture_bump else
+                             extra.get(mat.name, {}).get("norm"))})
         face_mat.append(np.full(len(v) // 3, index, np.int32))
     if not positions:
-        return ObjMesh(np.zeros((0, 3, 3), np.float32), None, np.zeros(0, np.int32), [])
+        return ObjMesh(np.zeros((0, 3, 3), np.float32), None, None, np.zeros(0, np.int32), [])
     return ObjMesh(np.concatenate(positions),
                    np.concatenate(normals) if all_have_normals and normals else None,
+                   np.concatenate(uvs) if all_have_uvs and uvs else None,
                    np.concatenate(face_mat), materials)
+
+
+def _mtl_extras(path):
+    """PBR keys of the .mtl files that pywavefront does not read: Pr (roughness), Pm
+    (metallic) and norm (normal map), per material name."""
+    out = {}
+    try:
+        with open(path, "rb") as f:
+            libs = re.findall(rb"^[ \t]*mtllib[ \t]+(.+?)[ \t]*$", f.read(), re.M)
+    except OSError:
+        return out
+    for lib in libs:
+        mtl = os.path.join(os.path.dirname(path), lib.decode("utf-8", "replace"))
+        try:
+            with open(mtl, "r", encoding="utf-8", errors="replace") as f:
+                lines = f.read().splitlines()
+        except OSError:
+            continue
+        cur = None
+        for line in lines:
+            parts = line.split()
+            if not parts:
+                continue
+            if parts[0] == "newmtl" and len(parts) > 1:
+                cur = out.setdefault(" ".join(parts[1:]), {})
+            elif cur is not None and parts[0] in ("Pr", "Pm") and len(parts) > 1:
+                try:
+                    cur[parts[0]] = float(parts[1])
+                except ValueError:
+                    pass
+            elif cur is not None and parts[0] == "norm" and len(parts) > 1:
+                cur["norm"] = parts[-1]
+    return out

@@ -1,0 +1,143 @@
+"""Environment map: an equirectangular image lit from infinitely far away.
+
+Mapping (scene format): a world direction d is first turned by -rotation about +Y, then
+u = 0.5 + atan2(d.x, -d.z) / (2 pi), v = acos(d.y) / pi (v = 0: top row), and the image is
+read bilinearly with texel centres at ((i + 0.5) / W, (j + 0.5) / H), wrapping in u and
+clamping in v.
+
+Importance sampling (Pharr, Jakob, Humphreys, PBRT 3rd ed., sec. 14.2.4): a piecewise-
+constant 2-D distribution over the W x H cells of [0,1]^2, a marginal over rows and a
+conditional per row. A cell's weight is its mean luminance under the bilinear
+reconstruction times sin(theta) of its centre. A point (u, v) drawn uniformly inside the
+chosen cell maps to a direction with solid-angle density p(u, v) / (2 pi^2 sin theta):
+the Jacobian of the mapping, exact (the thesis renderer used 2 pi sin theta, pi too large).
+
+Arrays: ``env_img`` (H, W, 3) radiance with the intensity applied; ``env_marg`` (H + 1,)
+and ``env_cond`` (H, W + 1) CDFs; ``env_pdf`` (H, W) the density p(u, v) of each cell;
+``env_info`` = (cos rotation, sin rotation, probability that next-event estimation picks
+the environment, 0).
+"""
+import math
+
+import numpy as np
+
+from .constants import HALF, ONE, PI, TWO_PI, ZERO
+from .device import device
+
+INV_TWO_PI = np.float32(1.0 / (2.0 * np.pi))
+INV_PI_F = np.float32(1.0 / np.pi)
+TWO_PI_SQ = np.float32(2.0 * np.pi * np.pi)
+
+
+@device
+def env_uv(env_info, d):
+    """Texture coordinates (u, v) in [0, 1] of world direction d."""
+    c = env_info[0]
+    s = env_info[1]
+    x = d[0] * c - d[2] * s
+    z = d[0] * s + d[2] * c
+    y = min(max(d[1], -ONE), ONE)
+    u = HALF + math.atan2(x, -z) * INV_TWO_PI
+    v = math.acos(y) * INV_PI_F
+    return u, v, y
+
+
+@device
+def env_eval(env_img, env_info, d):
+    """Radiance arriving from direction d (bilinear)."""
+    h = env_img.shape[0]
+    w = env_img.shape[1]
+    u, v, _ = env_uv(env_info, d)
+    x = u * w - HALF
+    y = v * h - HALF
+    fx0 = math.floor(x)
+    fy0 = math.floor(y)
+    fx = x - fx0
+    fy = y - fy0
+    i0 = int(fx0) % w
+    if i0 < 0:
+        i0 += w
+    i1 = i0 + 1
+    if i1 >= w:
+        i1 = 0
+    j0 = int(fy0)
+    j1 = j0 + 1
+    j0 = min(max(j0, 0), h - 1)
+    j1 = min(max(j1, 0), h - 1)
+    w00 = (ONE - fx) * (ONE - fy)
+    w10 = fx * (ONE - fy)
+    w01 = (ONE - fx) * fy
+    w11 = fx * fy
+    r = (env_img[j0, i0, 0] * w00 + env_img[j0, i1, 0] * w10 + env_img[j1, i0, 0] * w01 +
+         env_img[j1, i1, 0] * w11)
+    g = (env_img[j0, i0, 1] * w00 + env_img[j0, i1, 1] * w10 + env_img[j1, i0, 1] * w01 +
+         env_img[j1, i1, 1] * w11)
+    b = (env_img[j0, i0, 2] * w00 + env_img[j0, i1, 2] * w10 + env_img[j1, i0, 2] * w01 +
+         env_img[j1, i1, 2] * w11)
+    return r, g, b
+
+
+@device
+def env_pdf(env_pdf_arr, env_info, d):
+    """Solid-angle density with which env_sample produces direction d."""
+    h = env_pdf_arr.shape[0]
+    w = env_pdf_arr.shape[1]
+    u, v, y = env_uv(env_info, d)
+    sin_t = math.sqrt(max(ONE - y * y, ZERO))
+    if sin_t <= ZERO:
+        return ZERO
+    i = min(max(int(u * w), 0), w - 1)
+    j = min(max(int(v * h), 0), h - 1)
+    return env_pdf_arr[j, i] / (TWO_PI_SQ * sin_t)
+
+
+@device
+def _search(cdf, row, n, u):
+    """Index k in [0, n) with cdf[row, k] <= u < cdf[row, k + 1]."""
+    lo = 0
+    hi = n
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if cdf[row, mid] <= u:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@device
+def env_sample(env_marg, env_cond, env_pdf_arr, env_info, u1, u2):
+    """(direction, solid-angle pdf); pdf = 0 means no sample."""
+    h = env_pdf_arr.shape[0]
+    w = env_pdf_arr.shape[1]
+    # rows: the marginal is stored as a (1, H + 1) view-compatible 1-D array
+    lo = 0
+    hi = h
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if env_marg[mid] <= u1:
+            lo = mid
+        else:
+            hi = mid
+    j = lo
+    span = env_marg[j + 1] - env_marg[j]
+    fv = (u1 - env_marg[j]) / span if span > ZERO else HALF
+    i = _search(env_cond, j, w, u2)
+    span = env_cond[j, i + 1] - env_cond[j, i]
+    fu = (u2 - env_cond[j, i]) / span if span > ZERO else HALF
+    fv = min(max(fv, ZERO), ONE)
+    fu = min(max(fu, ZERO), ONE)
+    v = (np.float32(j) + fv) / np.float32(h)
+    u = (np.float32(i) + fu) / np.float32(w)
+    theta = v * PI
+    phi = (u - HALF) * TWO_PI
+    sin_t = math.sin(theta)
+    cos_t = math.cos(theta)
+    xm = sin_t * math.sin(phi)
+    zm = -sin_t * math.cos(phi)
+    c = env_info[0]
+    s = env_info[1]
+    d = (xm * c + zm * s, cos_t, -xm * s + zm * c)
+    if sin_t <= ZERO:
+        return d, ZERO
+    return d, env_pdf_arr[j, i] / (TWO_PI_SQ * sin_t)

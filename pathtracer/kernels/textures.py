@@ -1,0 +1,66 @@
+"""Image textures: bilinear or nearest lookups with tiling, offset and wrapping.
+
+All textures of a scene share one float32 texel array ``tex_data`` (T, 3), already decoded
+to linear values on load (exact piecewise sRGB, see ``scene.textures``). Texture k is
+described by ``tex_int[k]`` = (first texel, width, height, filter: 0 bilinear, 1 nearest)
+and ``tex_f[k]`` = (tile u, tile v, offset u, offset v, scale r, g, b). Texture coordinates
+follow the OBJ convention (v = 0 at the bottom of the image); texel centres lie at
+((i + 0.5) / W, (j + 0.5) / H), and coordinates wrap (repeat) in both directions.
+"""
+import math
+
+from .constants import HALF, ONE
+from .device import device
+
+FILTER_BILINEAR = 0
+FILTER_NEAREST = 1
+
+
+@device
+def wrap(i, n):
+    r = i % n
+    return r + n if r < 0 else r
+
+
+@device
+def texel(tex_data, base, width, i, j):
+    k = base + j * width + i
+    return tex_data[k, 0], tex_data[k, 1], tex_data[k, 2]
+
+
+@device
+def tex_lookup(tex_data, tex_int, tex_f, t, u, v):
+    """Filtered, scaled rgb value of texture t at texture coordinates (u, v)."""
+    base = tex_int[t, 0]
+    w = tex_int[t, 1]
+    h = tex_int[t, 2]
+    uu = u * tex_f[t, 0] + tex_f[t, 2]
+    vv = v * tex_f[t, 1] + tex_f[t, 3]
+    x = uu * w
+    y = (ONE - vv) * h           # image row 0 is the top
+    if tex_int[t, 3] == FILTER_NEAREST:
+        r, g, b = texel(tex_data, base, w, wrap(int(math.floor(x)), w),
+                        wrap(int(math.floor(y)), h))
+    else:
+        x -= HALF
+        y -= HALF
+        fx0 = math.floor(x)
+        fy0 = math.floor(y)
+        fx = x - fx0
+        fy = y - fy0
+        i0 = wrap(int(fx0), w)
+        j0 = wrap(int(fy0), h)
+        i1 = wrap(i0 + 1, w)
+        j1 = wrap(j0 + 1, h)
+        a = texel(tex_data, base, w, i0, j0)
+        b_ = texel(tex_data, base, w, i1, j0)
+        c = texel(tex_data, base, w, i0, j1)
+        d = texel(tex_data, base, w, i1, j1)
+        w00 = (ONE - fx) * (ONE - fy)
+        w10 = fx * (ONE - fy)
+        w01 = (ONE - fx) * fy
+        w11 = fx * fy
+        r = a[0] * w00 + b_[0] * w10 + c[0] * w01 + d[0] * w11
+        g = a[1] * w00 + b_[1] * w10 + c[1] * w01 + d[1] * w11
+        b = a[2] * w00 + b_[2] * w10 + c[2] * w01 + d[2] * w11
+    return r * tex_f[t, 4], g * tex_f[t, 5], b * tex_f[t, 6]
