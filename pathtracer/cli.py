@@ -48,7 +48,8 @@ def build_parser():
         description="Physically based path tracer (Numba, CPU and CUDA). Renders SCENE "
                     "progressively: the image is rewritten at growing intervals, and Ctrl-C "
                     "stops the render and keeps what is done.")
-    p.add_argument("scene", help="scene file (JSON, see docs/scene-format.md)")
+    p.add_argument("scene", help="scene file (JSON, see docs/scene-format.md), or a thesis "
+                   "renderer scene folder")
     p.add_argument("-o", "--output", default=None,
                    help="output image; the extension picks the format: .png (8-bit sRGB, "
                         "with a lossless float .exr beside it), .hdr, .exr or .npy (float linear RGB). "
@@ -70,6 +71,10 @@ def build_parser():
                    help="where the relMSE table goes (default: OUTPUT_STEM.relmse.csv)")
     p.add_argument("--pixel", metavar="X,Y", help="python backend: render only this pixel")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--allow-missing", action="store_true",
+                   help="thesis scene folders: render with defaults for missing files "
+                        "(objects left out, textures at their default values, a grey "
+                        "environment for a missing HDRI), with a warning")
     return p
 
 
@@ -96,7 +101,9 @@ def main(argv=None):
     from .scene import load_scene_description, compile_scene
     t0 = time.perf_counter()
     try:
-        desc = load_scene_description(scene_path)
+        desc = load_scene_description(scene_path, allow_missing=args.allow_missing)
+        for w in desc.warnings:
+            print(f"pt-render: warning: {w}", file=sys.stderr)
         if args.resolution:
             desc.camera.resolution = args.resolution
         scene = compile_scene(desc)

@@ -125,6 +125,8 @@ def make_render_pixel(features):
     ENV_MAP = bool(features.env_map)
     THIN_LENS = bool(features.thin_lens)
     NEE = ANY_LIGHTS or ENV_MAP
+    # Shading normals that differ from the geometric ones: fold lobes (see eval_world).
+    FOLD = SMOOTH or NORMAL_MAP
 
     @device
     def param1(scene, m, slot, col, u, v):
@@ -205,13 +207,40 @@ def make_render_pixel(features):
         return (dot(w, t), dot(w, s), dot(w, n))
 
     @device
+    def consistent(wo, wo_l, w, w_l, ng):
+        """Do the shading frame and the geometric surface agree on whether w is a
+        reflection or a transmission of wo?"""
+        return (wo_l[2] * w_l[2] > ZERO) == (dot(ng, wo) * dot(ng, w) > ZERO)
+
+    @device
+    def mirror(w, ng):
+        return madd(w, ng, -TWO * dot(w, ng))
+
+    @device
     def eval_world(is_principled, p, wo, wo_l, wi, t, s, n, ng):
-        """BSDF * |cos| and pdf for world direction wi; 0 where the geometric surface
-        disagrees with the shading frame (no light leaks through a surface)."""
+        """BSDF * |cos| and pdf for world direction wi.
+
+        Where the shading normal differs from the geometric one, part of a lobe can point
+        to the wrong side of the surface (a reflection below it, or a refraction that stays
+        above). Counting it would leak light through the surface and dropping it would lose
+        energy (a white furnace would not render white), so that part is folded back:
+        mirrored across the geometric tangent plane. The effective BSDF at wi is the
+        original one at wi (if wi is on its proper side) plus the original one at the mirror
+        image of wi (if that one was on the wrong side); sampling applies the same mirror,
+        so eval, pdf and sample stay consistent."""
         wi_l = to_local(wi, t, s, n)
-        if (wo_l[2] * wi_l[2] > ZERO) != (dot(ng, wo) * dot(ng, wi) > ZERO):
-            return (ZERO, ZERO, ZERO), ZERO
-        return bsdf_eval(is_principled, p, wo_l, wi_l)
+        f = (ZERO, ZERO, ZERO)
+        pdf = ZERO
+        if consistent(wo, wo_l, wi, wi_l, ng):
+            f, pdf = bsdf_eval(is_principled, p, wo_l, wi_l)
+        if FOLD:
+            wm = mirror(wi, ng)
+            wm_l = to_local(wm, t, s, n)
+            if not consistent(wo, wo_l, wm, wm_l, ng):
+                f2, pdf2 = bsdf_eval(is_principled, p, wo_l, wm_l)
+                f = add(f, f2)
+                pdf += pdf2
+        return f, pdf
 
     @device
     def light_barycentrics(scene, ref, q):
@@ -363,10 +392,10 @@ def make_render_pixel(features):
                 else:
                     tangent, _ = frame(ns)
             else:
-                # Mitsuba's choice without texture coordinates: the geometric frame's
-                # tangent, projected onto the shading normal.
-                tg, _ = frame(ng)
-                tangent = madd(tg, ns, -dot(tg, ns))
+                # Without texture coordinates the tangent is dp/du of the triangle's
+                # barycentric parameterisation, its first edge, projected onto the shading
+                # normal: Mitsuba 3's choice, so that anisotropy can be checked against it.
+                tangent = madd(e1, ns, -dot(e1, ns))
                 if dot(tangent, tangent) > ZERO:
                     tangent = normalize(tangent)
                 else:
@@ -457,8 +486,17 @@ def make_render_pixel(features):
             if not (pdf_bsdf > ZERO):
                 break
             wi = normalize(to_world(wi_l, tangent, bitangent, ns))
-            if (wo_l[2] * wi_l[2] > ZERO) != (dot(ng, wo) * dot(ng, wi) > ZERO):
-                break   # the shading frame and the surface disagree: absorbed
+            if not consistent(wo, wo_l, wi, wi_l, ng):
+                if not FOLD:
+                    break   # the shading frame and the surface disagree: absorbed
+                # folded back across the surface (see eval_world)
+                wi = mirror(wi, ng)
+            if FOLD:
+                f, pdf_bsdf = eval_world(is_principled, bp, wo, wo_l, wi, tangent, bitangent,
+                                         ns, ng)
+                if not (pdf_bsdf > ZERO):
+                    break
+                weight = scale(f, ONE / pdf_bsdf)
             beta = mul(beta, weight)
             pdf_prev = pdf_bsdf
             o = origin_towards(p, ng, wi)

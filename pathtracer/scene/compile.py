@@ -170,6 +170,9 @@ def _obj_material(tables, mm, obj_dir, scene_file, where):
     Ke -> emission, Pr or Ns -> roughness, Pm -> metallic, Ni -> eta, map_Kd -> albedo
     texture, map_Bump / norm -> normal map). Ns maps to GGX alpha = sqrt(2 / (Ns + 2))
     (Walter et al. 2007's Phong-Beckmann match), roughness = sqrt(alpha)."""
+    if mm.get("undefined"):
+        raise SceneError(f"usemtl {mm['name']!r}: no such material in the .mtl file(s) (or "
+                         "give the object a 'material')", scene_file, where)
     specular = any(x > 0 for x in mm["Ks"]) or mm.get("Pr") is not None or \
         mm.get("Pm") is not None
     textures = {}
@@ -237,7 +240,12 @@ def _environment_arrays(env, scene_file):
     img, is_float = read_image(env.path, env.pointer, scene_file)
     if not is_float:
         img = srgb_to_linear(img)
-    img = np.maximum(img, 0.0) * env.intensity
+    return environment_distribution(np.maximum(img, 0.0) * env.intensity)
+
+
+def environment_distribution(img):
+    """(image, marginal CDF, conditional CDFs, cell densities) of an equirectangular map,
+    or None when it is black everywhere."""
     h, w = img.shape[:2]
     lum = img @ np.array([0.2126, 0.7152, 0.0722])
     # mean of the bilinear reconstruction over each cell: [1, 6, 1] / 8 in u (wrapping)

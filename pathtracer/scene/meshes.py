@@ -18,7 +18,7 @@ import numpy as np
 
 from .errors import SceneError
 
-CACHE_VERSION = 3
+CACHE_VERSION = 4
 
 
 @dataclass
@@ -142,10 +142,10 @@ def _parse(path):
         # pywavefront names faces without `usemtl` "default<N>"; those get no material.
         index = -1 if (mat.is_default and re.fullmatch(r"default\d+", mat.name)) else len(materials)
         if index >= 0:
-            if mat.is_default:
-                raise SceneError(f"usemtl {mat.name!r}: no such material in the .mtl file(s)",
-                                 path)
             materials.append({
+                # usemtl of a material no .mtl defines: an error only where the scene
+                # does not give the object a material of its own
+                "undefined": bool(mat.is_default),
                 "name": mat.name, "Kd": list(mat.diffuse[:3]), "Ke": list(mat.emissive[:3]),
                 "Ks": list(mat.specular[:3]), "Ns": float(mat.shininess),
                 "Ni": float(mat.optical_density),

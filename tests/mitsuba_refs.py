@@ -1,0 +1,210 @@
+"""Render the Mitsuba 3 references that tests/test_mitsuba.py compares against.
+
+    python -m tests.mitsuba_refs            # needs `pip install -e .[bench]` and ../shared
+
+Each case is a smooth sphere lit by ../shared/assets/hdri/studio_small_03_1k.hdr (Mitsuba's
+`envmap` turned 180 degrees about +Y, which matches the scene format's mapping), seen by a
+40x40 perspective camera, path traced with max_depth = maxBounces + 1. The principled
+parameters are written in the scene format's names; MITSUBA_NAMES translates them. The
+images go to tests/references/<case>.npy with their settings in references.json.
+"""
+import datetime
+import json
+import os
+import platform
+import sys
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REF_DIR = os.path.join(HERE, "references")
+SPHERE = os.path.join(REF_DIR, "sphere.obj")
+RES = 40
+FOV = 30.0
+CAMERA = (0.0, 0.3, 4.0)
+MAX_BOUNCES = 8
+HDRI = "studio_small_03_1k.hdr"
+# Transmissive cases are lit by a smooth synthetic sky instead: through near-specular glass
+# the studio's small bright lamps make both renderers' estimates heavy-tailed (they agree
+# to 4 digits under smooth light; see docs/benchmarks.md).
+GRADIENT = os.path.join(REF_DIR, "gradient_sky.hdr")   # made by gradient_sky(), not kept
+TRANSMISSIVE = ("principled_glass_rough", "principled_mixed", "glass_smooth_vs_dielectric")
+
+
+def gradient_sky(path=GRADIENT, w=512, h=256):
+    """A low-frequency equirectangular sky: blue above, warm below, one soft bright lobe
+    and an azimuthal ramp (so that rotations and flips show). Fine enough that Mitsuba's
+    envmap, which places texels half a texel off the scene format's texel centres, reads
+    the same values to 0.1%."""
+    v = (np.arange(h) + 0.5) / h
+    u = (np.arange(w) + 0.5) / w
+    theta = np.pi * v[:, None]
+    phi = 2 * np.pi * (u[None, :] - 0.5)
+    d = np.stack([np.sin(theta) * np.sin(phi), np.cos(theta) + 0 * phi,
+                  -np.sin(theta) * np.cos(phi)], -1)
+    up = np.clip(d[..., 1], 0, 1)[..., None]
+    img = (up * np.array([0.3, 0.5, 1.0]) + (1 - up) * np.array([0.8, 0.5, 0.3]) *
+           (0.5 + 0.5 * u[None, :, None]))
+    lobe = np.exp(8 * (d @ np.array([0.6, 0.6, 0.53]) - 1))[..., None] * np.array([4, 3.5, 3])
+    img = (img + lobe).astype(np.float32)
+    from pathtracer.imageio_utils import write_image
+    write_image(path, img)
+    return path
+
+
+def env_for(case, shared):
+    if case in TRANSMISSIVE:
+        if not os.path.isfile(GRADIENT):
+            gradient_sky()
+        return GRADIENT
+    return os.path.join(shared, "assets", "hdri", HDRI)
+
+MITSUBA_NAMES = {"albedo": "base_color", "roughness": "roughness", "metallic": "metallic",
+                 "specular": "specular", "specularTint": "spec_tint",
+                 "anisotropic": "anisotropic", "sheen": "sheen", "sheenTint": "sheen_tint",
+                 "clearcoat": "clearcoat", "clearcoatGloss": "clearcoat_gloss",
+                 "subsurface": "flatness", "transmission": "spec_trans", "eta": "eta"}
+
+BASE = [0.8, 0.45, 0.2]
+DARK = [0.04, 0.03, 0.02]
+CASES = {
+    # each principled lobe alone, then mixed
+    "diffuse_only": {"type": "diffuse", "albedo": BASE},
+    "principled_default": {"albedo": BASE},
+    "principled_rough_dielectric": {"albedo": BASE, "roughness": 0.9},
+    "principled_subsurface": {"albedo": BASE, "subsurface": 1.0, "roughness": 0.7},
+    "principled_metal_smooth": {"albedo": BASE, "metallic": 1.0, "roughness": 0.15},
+    "principled_metal_rough": {"albedo": BASE, "metallic": 1.0, "roughness": 0.6},
+    "principled_anisotropic": {"albedo": BASE, "metallic": 1.0, "roughness": 0.4,
+                               "anisotropic": 0.8},
+    "principled_spec_tint": {"albedo": BASE, "specularTint": 1.0, "specular": 1.0,
+                             "roughness": 0.3},
+    # sheen and clearcoat are weak lobes: on a dark base they decide the image
+    "principled_sheen": {"albedo": DARK, "sheen": 1.0, "sheenTint": 0.5, "roughness": 0.8,
+                         "specular": 0.0},
+    "principled_clearcoat": {"albedo": DARK, "clearcoat": 1.0, "clearcoatGloss": 0.6,
+                             "roughness": 0.8, "specular": 0.0},
+    "principled_glass_rough": {"albedo": [1, 1, 1], "transmission": 1.0, "roughness": 0.3,
+                               "eta": 1.5},
+    "principled_mixed": {"albedo": BASE, "metallic": 0.3, "roughness": 0.45,
+                         "transmission": 0.4, "clearcoat": 0.5, "sheen": 0.5,
+                         "anisotropic": 0.3, "specularTint": 0.4},
+    # smooth glass against Mitsuba's dielectric
+    "glass_smooth_vs_dielectric": {"albedo": [1, 1, 1], "transmission": 1.0,
+                                   "roughness": 0.0, "eta": 1.5},
+}
+
+
+def sphere_obj(path=SPHERE, n_theta=32, n_phi=64):
+    """A UV sphere of radius 1 with exact vertex normals (no texture coordinates)."""
+    lines = ["# UV sphere, radius 1, generated by tests/mitsuba_refs.py"]
+    verts = [(0.0, 1.0, 0.0)]
+    for i in range(1, n_theta):
+        t = np.pi * i / n_theta
+        for j in range(n_phi):
+            p = 2 * np.pi * j / n_phi
+            verts.append((np.sin(t) * np.cos(p), np.cos(t), -np.sin(t) * np.sin(p)))
+    verts.append((0.0, -1.0, 0.0))
+    for v in verts:
+        lines.append("v %.9f %.9f %.9f" % v)
+    for v in verts:
+        lines.append("vn %.9f %.9f %.9f" % v)
+
+    def ring(i, j):
+        return 2 + (i - 1) * n_phi + (j % n_phi)
+    last = len(verts)
+    faces = []
+    for j in range(n_phi):
+        faces.append((1, ring(1, j), ring(1, j + 1)))
+        faces.append((last, ring(n_theta - 1, j + 1), ring(n_theta - 1, j)))
+    for i in range(1, n_theta - 1):
+        for j in range(n_phi):
+            a, b, c, d = ring(i, j), ring(i, j + 1), ring(i + 1, j), ring(i + 1, j + 1)
+            faces.append((a, c, b))
+            faces.append((b, c, d))
+    # orient counter-clockwise seen from outside
+    vv = np.array(verts)
+    for a, b, c in faces:
+        n = np.cross(vv[b - 1] - vv[a - 1], vv[c - 1] - vv[a - 1])
+        if n @ (vv[a - 1] + vv[b - 1] + vv[c - 1]) < 0:
+            b, c = c, b
+        lines.append(f"f {a}//{a} {b}//{b} {c}//{c}")
+    with open(path, "w") as f:
+        f.write("\n".join(lines) + "\n")
+    return path
+
+
+def our_scene(material, env_path, spp=64, seed=0):
+    """The same setup in the scene format."""
+    m = dict(material)
+    m.setdefault("type", "principled")
+    m["name"] = "m"
+    return {
+        "camera": {"resolution": [RES, RES], "position": list(CAMERA), "lookAt": [0, 0, 0],
+                   "fov": FOV},
+        "render": {"spp": spp, "maxBounces": MAX_BOUNCES, "seed": seed},
+        "materials": [m],
+        "objects": [{"name": "sphere", "file": SPHERE, "material": "m", "smooth": True}],
+        "environment": {"file": env_path},
+    }
+
+
+def mitsuba_bsdf(material):
+    if material.get("type") == "diffuse":
+        return {"type": "diffuse", "reflectance": {"type": "rgb", "value": material["albedo"]}}
+    if material.get("roughness") == 0.0 and material.get("transmission") == 1.0:
+        return {"type": "dielectric", "int_ior": material["eta"], "ext_ior": 1.0}
+    out = {"type": "principled"}
+    for k, v in material.items():
+        if k == "albedo":
+            out["base_color"] = {"type": "rgb", "value": v}
+        else:
+            out[MITSUBA_NAMES[k]] = v
+    return out
+
+
+def render_mitsuba(material, hdri_path, spp, variant="llvm_ad_rgb"):
+    import mitsuba as mi
+    mi.set_variant(variant)
+    T = mi.ScalarTransform4f
+    scene = mi.load_dict({
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": MAX_BOUNCES + 1},
+        "sensor": {"type": "perspective", "fov": FOV, "fov_axis": "x",
+                   "to_world": T().look_at(origin=list(CAMERA), target=[0, 0, 0],
+                                           up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": RES, "height": RES,
+                            "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+                   "sampler": {"type": "independent", "sample_count": spp}},
+        "env": {"type": "envmap", "filename": hdri_path,
+                "to_world": T().rotate([0, 1, 0], 180)},
+        "sphere": {"type": "obj", "filename": SPHERE, "face_normals": False,
+                   "bsdf": mitsuba_bsdf(material)},
+    })
+    img = np.zeros((RES, RES, 3))
+    passes = max(1, spp // 1024)
+    for k in range(passes):
+        img += np.array(mi.render(scene, spp=spp // passes, seed=k))
+    return (img / passes).astype(np.float32), mi.__version__
+
+
+def main():
+    shared = os.environ.get("PT_RENDER_SHARED", os.path.join(HERE, "..", "..", "shared"))
+    sphere_obj()
+    gradient_sky()
+    spp = int(sys.argv[1]) if len(sys.argv) > 1 else 16384
+    meta = {"hdri": HDRI, "resolution": RES, "spp": spp, "max_bounces": MAX_BOUNCES,
+            "date": datetime.date.today().isoformat(), "machine": platform.processor() or
+            platform.machine(), "command": "python -m tests.mitsuba_refs " + str(spp),
+            "cases": CASES}
+    for name, material in CASES.items():
+        img, version = render_mitsuba(material, env_for(name, shared), spp)
+        meta["mitsuba"] = version
+        np.save(os.path.join(REF_DIR, name + ".npy"), img)
+        print(name, img.mean(axis=(0, 1)), flush=True)
+    with open(os.path.join(REF_DIR, "references.json"), "w") as f:
+        json.dump(meta, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()

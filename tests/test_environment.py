@@ -1,0 +1,165 @@
+"""The environment map: chi-square test of its importance sampling against its pdf (a map
+with one bright pixel, and the real sun HDRI at full strength), the mapping and rotation
+of the scene format, and furnace tests (uniform environment, diffuse albedo 1 -> 1)."""
+import math
+import os
+
+import numpy as np
+import pytest
+from numba import njit
+
+from pathtracer.kernels.envmap import env_eval, env_pdf, env_sample, env_uv
+from pathtracer.kernels.rng import path_key, sample_1d
+from pathtracer.scene import load_scene
+from pathtracer.scene.compile import environment_distribution
+from pathtracer.scene.images import read_image
+from pathtracer.imageio_utils import write_image
+from tests.conftest import BACKENDS, SHARED, needs_shared
+from tests.scenes import sphere_mesh, write_scene
+from tests.test_render import mean_and_se, run
+from tests.test_sampling import chi2_test
+
+
+def info(rotation_deg=0.0):
+    r = math.radians(rotation_deg)
+    return np.array([math.cos(r), math.sin(r), 1.0, 0.0], np.float32)
+
+
+@njit(cache=True)
+def _hist(marg, cond, pdf, inf, n, n_t, n_p):
+    h = np.zeros((n_t, n_p))
+    bad = 0
+    for i in range(n):
+        k = path_key(i, 3, 77)
+        d, p = env_sample(marg, cond, pdf, inf, sample_1d(k, 0), sample_1d(k, 1))
+        if p <= 0:
+            continue
+        p2 = env_pdf(pdf, inf, d)
+        if abs(p2 - p) > 1e-3 * p:
+            bad += 1
+        t = math.acos(min(max(d[1], -1.0), 1.0))
+        ph = math.atan2(d[0], -d[2]) + math.pi
+        h[min(int(t / math.pi * n_t), n_t - 1), min(int(ph / (2 * math.pi) * n_p), n_p - 1)] += 1
+    return h, bad
+
+
+@njit(cache=True)
+def _integral(pdf, inf, n_t, n_p, sub):
+    """Integral of the solid-angle pdf over (theta, phi) cells, in theta (smooth: the
+    sin theta of the measure cancels the pdf's 1 / sin theta)."""
+    out = np.zeros((n_t, n_p))
+    dt = math.pi / n_t
+    dp = 2 * math.pi / n_p
+    for i in range(n_t):
+        for j in range(n_p):
+            acc = 0.0
+            for a in range(sub):
+                t = (i + (a + 0.5) / sub) * dt
+                for b in range(sub):
+                    ph = (j + (b + 0.5) / sub) * dp - math.pi
+                    d = (np.float32(math.sin(t) * math.sin(ph)), np.float32(math.cos(t)),
+                         np.float32(-math.sin(t) * math.cos(ph)))
+                    acc += env_pdf(pdf, inf, d) * math.sin(t)
+            out[i, j] = acc * dt * dp / (sub * sub)
+    return out
+
+
+def _check_sampling(img, rotation, n=400_000, n_t=32, n_p=64, sub=6):
+    img32, marg, cond, pdf = environment_distribution(img)
+    inf = info(rotation)
+    h, bad = _hist(marg, cond, pdf, inf, n, n_t, n_p)
+    # the direction -> (u, v) round trip may land in the neighbouring cell by rounding
+    assert bad <= n * 1e-4, "env_pdf disagrees with env_sample's pdf"
+    integ = _integral(pdf, inf, n_t, n_p, sub)
+    assert integ.sum() == pytest.approx(1.0, abs=5e-3)
+    chi2_test(h, integ * n)
+
+
+def test_one_bright_pixel_map():
+    img = np.full((16, 32, 3), 1e-3)
+    img[5, 20] = 5e4
+    _check_sampling(img, 30.0)
+
+
+@needs_shared
+def test_sun_hdri_sampling():
+    img, _ = read_image(os.path.join(SHARED, "assets", "hdri", "rooitou_park_1k.hdr"))
+    assert img.max() > 6e4          # the sun, at full strength
+    _check_sampling(img, -75.0, sub=32)
+
+
+def test_mapping_and_rotation():
+    """u = 0.5 + atan2(x, -z) / 2pi, v = acos(y) / pi; rotation turns the map
+    counter-clockwise seen from above."""
+    f = np.float32
+    u, v, _ = env_uv(info(0), (f(0), f(0), f(-1)))
+    assert (u, v) == pytest.approx((0.5, 0.5))
+    u, v, _ = env_uv(info(0), (f(1), f(0), f(0)))
+    assert (u, v) == pytest.approx((0.75, 0.5))
+    u, v, _ = env_uv(info(0), (f(0), f(1), f(0)))
+    assert v == pytest.approx(0.0)
+    # the map's -z feature (u = 0.5) turned by +90 degrees appears towards -x
+    u, _, _ = env_uv(info(90), (f(-1), f(0), f(0)))
+    assert u == pytest.approx(0.5, abs=1e-6)
+    # a single bright texel is seen where the mapping says
+    img = np.zeros((8, 16, 3), np.float32)
+    img[2, 12, 0] = 1.0     # u = 12.5 / 16, v = 2.5 / 8
+    u0, v0 = 12.5 / 16, 2.5 / 8
+    t, ph = v0 * math.pi, (u0 - 0.5) * 2 * math.pi
+    d = (f(math.sin(t) * math.sin(ph)), f(math.cos(t)), f(-math.sin(t) * math.cos(ph)))
+    assert env_eval(img, info(0), d) == pytest.approx((1, 0, 0), abs=1e-5)
+
+
+def _furnace(tmp_path, env, backend, material):
+    v, f = sphere_mesh(16, 32)
+    scene = {
+        "camera": {"resolution": [24, 24], "position": [0, 0, 4], "lookAt": [0, 0, 0],
+                   "fov": 40},
+        "render": {"spp": 64, "maxBounces": 200, "rrDepth": 200},
+        "materials": [dict(material, name="m")],
+        "objects": [{"name": "s", "vertices": v, "faces": f, "material": "m",
+                     "smooth": True}],
+        "environment": env,
+    }
+    s = load_scene(write_scene(tmp_path, scene))
+    return run(s, backend, spp=64).film.image()
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("kind", ["color", "file"])
+def test_white_furnace_diffuse(tmp_path, backend, kind):
+    """A diffuse albedo-1 object under a uniform environment of 1 renders 1 everywhere
+    it is seen; with the file the estimate mixes environment sampling and BSDF sampling
+    by MIS, so any error in either pdf shows."""
+    if kind == "file":
+        write_image(str(tmp_path / "white.hdr"), np.ones((32, 64, 3), np.float32))
+        env = {"file": "white.hdr", "rotation": 33}
+    else:
+        env = {"color": 1.0}
+    img = _furnace(tmp_path, env, backend, {"type": "diffuse", "albedo": 1.0})
+    if kind == "color":
+        # BSDF sampling alone: every sample is exactly 1
+        assert np.abs(img - 1).max() < 1e-4, np.abs(img - 1).max()
+    else:
+        # MIS of two strategies: unbiased, not noise-free. Image mean within 4 standard
+        # errors of 1, and no pixel beyond 6 of its own.
+        m, se = mean_and_se(img)
+        assert np.all(np.abs(m - 1) < 4 * se + 1e-4), (m, se)
+        assert np.abs(img - 1).max() < 0.25
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_white_furnace_glass_and_metal(tmp_path, backend):
+    """Energy-conserving principled configurations (white metal; clear glass: what enters
+    leaves) render 1 under a uniform environment, within noise: never more."""
+    write_image(str(tmp_path / "white.hdr"), np.ones((32, 64, 3), np.float32))
+    for mat in ({"albedo": 1.0, "metallic": 1.0, "roughness": 0.0},
+                {"albedo": 1.0, "metallic": 1.0, "roughness": 0.5},
+                {"albedo": 1.0, "transmission": 1.0, "roughness": 0.0, "eta": 1.5},
+                {"albedo": 1.0, "transmission": 1.0, "roughness": 0.4, "eta": 1.33}):
+        img = _furnace(tmp_path, {"file": "white.hdr"}, backend, mat)
+        m, se = mean_and_se(img)
+        # rough microfacet models lose the energy of multiple scattering between facets
+        # (a few %): the mean may fall below 1, never rise above it.
+        assert np.all(m < 1 + 4 * se + 1e-4), (mat, m, se)
+        assert np.all(m > 0.9), (mat, m)
