@@ -178,13 +178,17 @@ print(sum(len(x) for x in one_pixel.inspect_llvm().values()))
 
 
 def test_specialisation_removes_unused_code():
-    """A kernel for a scene without point lights, environment or smooth normals compiles
-    none of their code: each flag, when set, adds code to the base kernel. Each variant is
+    """A kernel for a scene without point lights, environment, smooth normals, principled
+    materials, textures, an HDRI or a thin lens compiles none of their code: each flag,
+    when set, adds code to the base kernel. Each variant is
     compiled in a fresh process (the IR of one process depends on what it compiled before)."""
     import subprocess
     import sys
     sizes = []
-    for flags in ("1000", "1100", "1010", "1001"):   # tri lights + point / env / smooth
+    # tri lights, then + point lights / constant env / smooth / principled / textures /
+    # env map / thin lens (flags in Features order)
+    for flags in ("1000", "1100", "1010", "1001", "10001", "100001", "100000001",
+                  "1000000001"):
         r = subprocess.run([sys.executable, "-c", SPECIALISATION_PROBE, ROOT, flags],
                            capture_output=True, text=True, cwd=ROOT, timeout=600)
         assert r.returncode == 0, r.stderr[-2000:]

@@ -44,6 +44,7 @@ class CompiledScene:
     description: SceneDescription
     timings: dict = field(default_factory=dict)   # seconds: mesh_load, bvh_build, total
     bvh_depth: int = 0
+    origin_shift: tuple = (0.0, 0.0, 0.0)   # subtracted from all positions (float64)
 
 
 def load_scene(path, use_cache=True, allow_missing=False):
@@ -52,7 +53,7 @@ def load_scene(path, use_cache=True, allow_missing=False):
                          use_cache=use_cache)
 
 
-def _camera_array(cam):
+def _camera_array(cam, shift=np.zeros(3)):
     w, h = cam.resolution
     pos = np.asarray(cam.position, np.float64)
     if cam.look_at is not None:
@@ -67,7 +68,7 @@ def _camera_array(cam):
     tan_x = math.tan(math.radians(cam.fov) / 2)
     tan_y = tan_x * h / w
     out = np.zeros(16, np.float32)
-    out[0:3] = pos
+    out[0:3] = pos - shift
     out[3:6] = fwd
     out[6:9] = right * tan_x
     out[9:12] = up * tan_y
@@ -394,7 +395,13 @@ def compile_scene(desc, use_cache=True):
         uvs = np.zeros((0, 3, 2))
         tan = np.zeros((0, 3, 3))
         tsg = np.zeros((0, 3))
-    pos32 = pos.astype(np.float32)
+    # Re-centre the scene on its bounding box (in float64) before rounding to float32: a
+    # scene far from the origin keeps the precision of one at the origin, so moving a
+    # scene does not change its image. Camera and lights move with it.
+    shift = np.zeros(3)
+    if len(pos):
+        shift = 0.5 * (pos.reshape(-1, 3).min(axis=0) + pos.reshape(-1, 3).max(axis=0))
+    pos32 = (pos - shift).astype(np.float32)
 
     # ---- BVH; triangles reordered so each leaf is a contiguous range ----
     t0 = time.perf_counter()
@@ -467,7 +474,7 @@ def compile_scene(desc, use_cache=True):
             tri_light_pdf[ref] = pmf / area[ref]
     point_lights = np.zeros((max(1, len(desc.point_lights)), 6), np.float32)
     for i, light in enumerate(desc.point_lights):
-        point_lights[i, 0:3] = light.position
+        point_lights[i, 0:3] = np.asarray(light.position) - shift
         point_lights[i, 3:6] = light.intensity
 
     has_tri_lights = any(r >= 0 for r in refs)
@@ -495,7 +502,7 @@ def compile_scene(desc, use_cache=True):
                         tangents=use_tangents, env_map=has_env_map,
                         thin_lens=desc.camera.lens_radius > 0)
     arrays = SceneArrays(
-        cam=_camera_array(desc.camera), tri_v=tri_v, tri_n=tri_n, tri_mat=tri_mat_arr,
+        cam=_camera_array(desc.camera, shift), tri_v=tri_v, tri_n=tri_n, tri_mat=tri_mat_arr,
         mat=mat, tri_light_pdf=tri_light_pdf, light_cdf=light_cdf, light_ref=light_ref,
         point_lights=point_lights, env=env, bvh_box=bvh.box, bvh_child=bvh.child,
         tri_uv=tri_uv, tri_t=tri_t, mat_tex=mat_tex, tex_data=tex_data, tex_int=tex_int,
@@ -506,4 +513,4 @@ def compile_scene(desc, use_cache=True):
     timings = {"mesh_load": t_mesh, "bvh_build": t_bvh,
                "total": time.perf_counter() - t_start}
     return CompiledScene(arrays, features, w, h, r.spp, r.max_bounces, r.rr_depth, r.seed,
-                         n_tri, desc, timings, bvh.depth)
+                         n_tri, desc, timings, bvh.depth, tuple(shift))

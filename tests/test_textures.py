@@ -1,0 +1,176 @@
+"""Textures (exact sRGB, filtering, wrapping, tiling, orientation), normal maps and
+tangents, the thin lens, and the thesis renderer's scene folders."""
+import math
+import os
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+from pathtracer.kernels.camera import thin_lens_ray
+from pathtracer.kernels.textures import tex_lookup
+from pathtracer.scene import load_scene
+from pathtracer.scene.compile import _vertex_tangents
+from pathtracer.scene.errors import SceneError
+from pathtracer.scene.images import srgb_to_linear
+from tests.conftest import SHARED, needs_shared
+from tests.scenes import write_scene
+from tests.test_render import mean_and_se, run
+
+F = np.float32
+
+
+def test_srgb_decode_is_exact_piecewise():
+    assert srgb_to_linear(0.5) == pytest.approx(0.214041, abs=1e-6)
+    assert srgb_to_linear(0.04045) == pytest.approx(0.04045 / 12.92)
+    assert srgb_to_linear(1.0) == pytest.approx(1.0)
+    assert abs(srgb_to_linear(0.5) - 0.5 ** 2.2) > 1e-3      # not a 2.2 power
+
+
+def _tex(img, filt=0, tile=(1, 1), offset=(0, 0), scale=(1, 1, 1)):
+    h, w = img.shape[:2]
+    data = img.reshape(-1, 3).astype(F)
+    ti = np.array([[0, w, h, filt]], np.int32)
+    tf = np.array([[*tile, *offset, *scale]], F)
+    return lambda u, v: np.array(tex_lookup(data, ti, tf, 0, F(u), F(v)))
+
+
+def test_bilinear_nearest_wrap_tile_orientation():
+    img = np.zeros((2, 4, 3))
+    img[0, :, 0] = [1, 2, 3, 4]     # top row
+    img[1, :, 0] = [5, 6, 7, 8]     # bottom row (v = 0 side)
+    lin = _tex(img)
+    # texel centres ((i + 0.5) / W, (j + 0.5) / H), v = 0 at the bottom of the image
+    assert lin(0.125, 0.25)[0] == pytest.approx(5)
+    assert lin(0.375, 0.75)[0] == pytest.approx(2)
+    assert lin(0.25, 0.25)[0] == pytest.approx(5.5)          # halfway between texels
+    assert lin(0.0, 0.25)[0] == pytest.approx(6.5)           # wraps: (8 + 5) / 2
+    assert lin(-0.875, 0.25)[0] == pytest.approx(5)          # negative u wraps
+    assert lin(1.125, 1.25)[0] == pytest.approx(5)           # u, v > 1 wrap
+    near = _tex(img, filt=1)
+    assert near(0.26, 0.26)[0] == 6 and near(0.99, 0.99)[0] == 4
+    tiled = _tex(img, filt=1, tile=(2, 1), offset=(0.25, 0), scale=(2, 1, 1))
+    # u' = 2 u + 0.25 -> 0.25 + 0.25 = 0.5 -> texel 2 of the bottom row (7), scaled by 2
+    assert tiled(0.125, 0.25)[0] == pytest.approx(14)
+
+
+def _quad_scene(tmp_path, material, res=(8, 8), uv_flip=False):
+    """A square [-1, 1]^2 at z = 0 with uvs, filling the view of an orthographic-like
+    narrow camera; lit by a uniform environment of 1, direct light only."""
+    obj = tmp_path / "quad.obj"
+    obj.write_text("v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\n"
+                   "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\n"
+                   "f 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n")
+    return {"camera": {"resolution": list(res), "position": [0, 0, 100], "lookAt": [0, 0, 0],
+                       "fov": 2 * math.degrees(math.atan(1 / 100))},
+            "render": {"spp": 16, "maxBounces": 1},
+            "materials": [dict(material, name="m")],
+            "objects": [{"name": "q", "file": "quad.obj", "material": "m"}],
+            "environment": {"color": 1.0}}
+
+
+def test_textured_albedo_renders_decoded_texels(tmp_path):
+    """A 2x2 sRGB texture seen head-on under a uniform environment of 1: each quarter of
+    the image is its texel's decoded value (diffuse albedo a under L = 1 reflects a)."""
+    texels = np.array([[[255, 0, 0], [0, 128, 0]], [[0, 0, 64], [200, 200, 200]]], np.uint8)
+    iio.imwrite(tmp_path / "t.png", texels)
+    scene = _quad_scene(tmp_path, {"type": "diffuse",
+                                   "albedo": {"texture": "t.png", "filter": "nearest"}})
+    img = run(load_scene(write_scene(tmp_path, scene)), "cpu", spp=64).film.image()
+    expect = srgb_to_linear(texels / 255.0)
+    quads = [img[:4, :4], img[:4, 4:], img[4:, :4], img[4:, 4:]]
+    for q, e in zip(quads, expect.reshape(4, 3)):
+        assert np.allclose(q.mean((0, 1)), e, rtol=2e-2, atol=2e-3), (q.mean((0, 1)), e)
+
+
+def test_normal_map_tilted_past_horizon_keeps_energy(tmp_path):
+    """A normal map whose normals lean up to 80 degrees away (and some texels point below
+    the surface) on a white diffuse quad under a uniform environment: each pixel still
+    reflects 1 (no black, no leak, no gain)."""
+    h, w = 16, 16
+    ang = np.linspace(0, math.radians(80), w)
+    n = np.stack([np.sin(ang)[None, :].repeat(h, 0), np.zeros((h, w)),
+                  np.cos(ang)[None, :].repeat(h, 0)], -1)
+    n[:2] = [0.0, 0.0, -1.0]                 # below the surface: must not turn black
+    iio.imwrite(tmp_path / "n.png", np.round((n * 0.5 + 0.5) * 255).astype(np.uint8))
+    # roughness 0 and specular 0: Burley's diffuse without retro-reflection, which never
+    # reflects more than it receives
+    scene = _quad_scene(tmp_path, {"albedo": 1.0, "specular": 0.0, "roughness": 0.0,
+                                   "normalMap": "n.png"})
+    scene["render"]["maxBounces"] = 50
+    s = load_scene(write_scene(tmp_path, scene))
+    assert s.features.normal_map and s.features.tangents
+    img = run(s, "cpu", spp=256).film.image()
+    # (one-sample lobe mixing makes single samples noisy; the mean is what must hold)
+    m, se = mean_and_se(img)
+    assert np.all(m < 1 + 4 * se) and img.min() > 0.5, (m, se, img.min())
+    assert img.max() < 1.2
+
+
+def test_tangents_follow_u():
+    pos = np.array([[[0, 0, 0], [2, 0, 0], [0, 3, 0]]], float)
+    nrm = np.array([[[0, 0, 1]] * 3], float)
+    uv = np.array([[[0, 0], [1, 0], [0, 1]]], float)
+    t, s = _vertex_tangents(pos, nrm, uv)
+    assert np.allclose(t, [1, 0, 0]) and np.all(s == 1)
+    t, s = _vertex_tangents(pos, nrm, uv[:, :, ::-1].copy())   # u along y, mirrored
+    assert np.allclose(t, [0, 1, 0]) and np.all(s == -1)
+
+
+def test_thin_lens_rays_meet_on_the_plane_in_focus():
+    cam = np.zeros(16, F)
+    cam[3:6] = [0, 0, -1]
+    tan = math.tan(math.radians(20))
+    cam[6:9] = [tan, 0, 0]
+    cam[9:12] = [0, tan, 0]
+    radius, focus = 0.05, 3.0
+    cam[12] = radius / tan
+    cam[13] = radius / tan
+    cam[14] = focus
+    pts, origins = [], []
+    for lu, lv in np.random.default_rng(0).random((50, 2)):
+        o, d = thin_lens_ray(cam, F(10), F(7), F(0.5), F(0.5), F(lu), F(lv), F(32), F(32))
+        t = focus / -d[2]
+        pts.append(np.array(o) + t * np.array(d))
+        origins.append(o)
+    pts = np.array(pts)
+    assert np.abs(pts - pts[0]).max() < 1e-5           # one point in focus
+    r = np.linalg.norm(np.array(origins)[:, :2], axis=1)
+    assert r.max() <= radius * 1.0001 and r.max() > 0.6 * radius
+
+
+def test_aperture_is_an_f_number(tmp_path):
+    scene = {"camera": {"focalLength": 0.05, "aperture": 2.0, "focusDistance": 2.0},
+             "objects": []}
+    s = load_scene(write_scene(tmp_path, scene))
+    assert s.features.thin_lens
+    assert s.description.camera.lens_radius == pytest.approx(0.05 / 4)
+
+
+SEED = os.path.join(SHARED, "assets", "seed-scenes")
+
+
+@needs_shared
+@pytest.mark.parametrize("name", ["Suzanne", "StanfordBunny"])
+def test_thesis_folders_render(name):
+    s = load_scene(os.path.join(SEED, name))
+    cam = s.description.camera
+    # its camera at z = -10 looking along +z, in our space at z = +10 looking along -z
+    assert cam.position == (0, 0, 10)
+    assert np.allclose(s.arrays.cam[3:6], [0, 0, -1])
+    assert cam.fov == pytest.approx(math.degrees(2 * math.atan(0.035 / 0.1)))
+    assert s.features.thin_lens and s.features.principled
+
+
+@needs_shared
+def test_thesis_folder_missing_files_are_named(tmp_path):
+    with pytest.raises(SceneError) as e:
+        load_scene(os.path.join(SEED, "ClockCC0"))
+    msg = str(e.value)
+    for f in ("Objects/plant.obj", "HDRI/hdri.hdr", "Textures/clock_albedo.bmp",
+              "Textures/table_normal.bmp"):
+        assert f in msg, f
+    s = load_scene(os.path.join(SEED, "ClockCC0"), allow_missing=True)
+    assert s.n_triangles > 10000
+    assert any("missing" in w for w in s.description.warnings)
+    assert any("unit suffix" in w for w in s.description.warnings)
