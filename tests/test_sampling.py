@@ -158,3 +158,11 @@ def test_power_heuristic_limits():
     assert power_heuristic(f(2), f(np.inf)) == 0.0
     assert power_heuristic(f(0), f(0)) == 0.0
     assert power_heuristic(f(3), f(0)) == 1.0
+
+
+def test_float32_sincos():
+    from pathtracer.kernels.warps import sincos
+    xs = np.linspace(-2 * np.pi, 2 * np.pi, 20001).astype(np.float32)
+    got = np.array([sincos(x) for x in xs])
+    assert np.abs(got[:, 0] - np.sin(xs.astype(float))).max() < 5e-7
+    assert np.abs(got[:, 1] - np.cos(xs.astype(float))).max() < 5e-7

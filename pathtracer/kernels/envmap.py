@@ -23,6 +23,7 @@ import numpy as np
 
 from .constants import HALF, ONE, PI, TWO_PI, ZERO
 from .device import device
+from .warps import sincos
 
 INV_TWO_PI = np.float32(1.0 / (2.0 * np.pi))
 INV_PI_F = np.float32(1.0 / np.pi)
@@ -48,19 +49,19 @@ def env_eval(env_img, env_info, d):
     h = env_img.shape[0]
     w = env_img.shape[1]
     u, v, _ = env_uv(env_info, d)
-    x = u * w - HALF
-    y = v * h - HALF
-    fx0 = math.floor(x)
-    fy0 = math.floor(y)
-    fx = x - fx0
-    fy = y - fy0
-    i0 = int(fx0) % w
+    x = u * np.float32(w) - HALF      # float32 sizes: int * float32 promotes to float64
+    y = v * np.float32(h) - HALF
+    ix = int(math.floor(x))
+    iy = int(math.floor(y))
+    fx = x - np.float32(ix)
+    fy = y - np.float32(iy)
+    i0 = ix % w
     if i0 < 0:
         i0 += w
     i1 = i0 + 1
     if i1 >= w:
         i1 = 0
-    j0 = int(fy0)
+    j0 = iy
     j1 = j0 + 1
     j0 = min(max(j0, 0), h - 1)
     j1 = min(max(j1, 0), h - 1)
@@ -86,8 +87,8 @@ def env_pdf(env_pdf_arr, env_info, d):
     sin_t = math.sqrt(max(ONE - y * y, ZERO))
     if sin_t <= ZERO:
         return ZERO
-    i = min(max(int(u * w), 0), w - 1)
-    j = min(max(int(v * h), 0), h - 1)
+    i = min(max(int(u * np.float32(w)), 0), w - 1)
+    j = min(max(int(v * np.float32(h)), 0), h - 1)
     return env_pdf_arr[j, i] / (TWO_PI_SQ * sin_t)
 
 
@@ -131,10 +132,10 @@ def env_sample(env_marg, env_cond, env_pdf_arr, env_info, u1, u2):
     u = (np.float32(i) + fu) / np.float32(w)
     theta = v * PI
     phi = (u - HALF) * TWO_PI
-    sin_t = math.sin(theta)
-    cos_t = math.cos(theta)
-    xm = sin_t * math.sin(phi)
-    zm = -sin_t * math.cos(phi)
+    sin_t, cos_t = sincos(theta)
+    sin_p, cos_p = sincos(phi)
+    xm = sin_t * sin_p
+    zm = -sin_t * cos_p
     c = env_info[0]
     s = env_info[1]
     d = (xm * c + zm * s, cos_t, -xm * s + zm * c)

@@ -391,7 +391,7 @@ def make_render_pixel(features):
                     tangent = normalize(tangent)
                 else:
                     tangent, _ = frame(ns)
-            else:
+            elif PRINCIPLED:
                 # Without texture coordinates the tangent is dp/du of the triangle's
                 # barycentric parameterisation, its first edge, projected onto the shading
                 # normal: Mitsuba 3's choice, so that anisotropy can be checked against it.
@@ -400,6 +400,8 @@ def make_render_pixel(features):
                     tangent = normalize(tangent)
                 else:
                     tangent, _ = frame(ns)
+            else:
+                tangent, _ = frame(ns)   # isotropic BSDFs only: any tangent will do
             bitangent = cross(ns, tangent)
             wo_l = to_local(wo, tangent, bitangent, ns)
             dim = D_FIRST_BOUNCE + bounce * DIMS_PER_BOUNCE

@@ -9,6 +9,8 @@ follow the OBJ convention (v = 0 at the bottom of the image); texel centres lie 
 """
 import math
 
+import numpy as np
+
 from .constants import HALF, ONE
 from .device import device
 
@@ -36,20 +38,21 @@ def tex_lookup(tex_data, tex_int, tex_f, t, u, v):
     h = tex_int[t, 2]
     uu = u * tex_f[t, 0] + tex_f[t, 2]
     vv = v * tex_f[t, 1] + tex_f[t, 3]
-    x = uu * w
-    y = (ONE - vv) * h           # image row 0 is the top
+    # (float32 sizes: int * float32 would promote to float64)
+    x = uu * np.float32(w)
+    y = (ONE - vv) * np.float32(h)           # image row 0 is the top
     if tex_int[t, 3] == FILTER_NEAREST:
         r, g, b = texel(tex_data, base, w, wrap(int(math.floor(x)), w),
                         wrap(int(math.floor(y)), h))
     else:
         x -= HALF
         y -= HALF
-        fx0 = math.floor(x)
-        fy0 = math.floor(y)
-        fx = x - fx0
-        fy = y - fy0
-        i0 = wrap(int(fx0), w)
-        j0 = wrap(int(fy0), h)
+        ix = int(math.floor(x))
+        iy = int(math.floor(y))
+        fx = x - np.float32(ix)
+        fy = y - np.float32(iy)
+        i0 = wrap(ix, w)
+        j0 = wrap(iy, h)
         i1 = wrap(i0 + 1, w)
         j1 = wrap(j0 + 1, h)
         a = texel(tex_data, base, w, i0, j0)

@@ -1,6 +1,8 @@
 """Warps from the unit square to other domains, with their densities (Mitsuba's naming)."""
 import math
 
+import numpy as np
+
 from .constants import F32, INV_PI, ONE, PI_OVER_4, TWO, ZERO
 from .device import device
 
@@ -13,6 +15,9 @@ _S7 = F32(-1.0 / 5040.0)
 _S9 = F32(1.0 / 362880.0)
 _C2 = F32(-0.5)
 _C4 = F32(1.0 / 24.0)
+TWO_OVER_PI = F32(2.0 / np.pi)
+PI_OVER_2_F = F32(np.pi / 2.0)
+HALF_F = F32(0.5)
 _C6 = F32(-1.0 / 720.0)
 _C8 = F32(1.0 / 40320.0)
 _C10 = F32(-1.0 / 3628800.0)
@@ -29,6 +34,23 @@ def sincos_quarter(x):
     s = x * (ONE + x2 * (_S3 + x2 * (_S5 + x2 * (_S7 + x2 * _S9))))
     c = ONE + x2 * (_C2 + x2 * (_C4 + x2 * (_C6 + x2 * (_C8 + x2 * _C10))))
     return s, c
+
+
+@device
+def sincos(x):
+    """(sin x, cos x) for |x| <= 2 pi in float32: reduced to the nearest multiple of pi/2,
+    then the quarter polynomial (libdevice's sinf carries a float64 path, see above)."""
+    k = int(math.floor(x * TWO_OVER_PI + HALF_F))
+    r = x - np.float32(k) * PI_OVER_2_F
+    s, c = sincos_quarter(r)
+    q = k & 3
+    if q == 0:
+        return s, c
+    if q == 1:
+        return c, -s
+    if q == 2:
+        return -s, -c
+    return -c, s
 
 
 @device
