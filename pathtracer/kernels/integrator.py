@@ -18,7 +18,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .camera import pinhole_ray, thin_lens_ray
-from .constants import INF, OFFSET_REL, ONE, ONE_MINUS_EPS, RR_MAX, SHADOW_SHORTEN, ZERO
+from .constants import INF, INV_PI, OFFSET_REL, ONE, ONE_MINUS_EPS, RR_MAX, SHADOW_SHORTEN, ZERO
 from .device import device
 from .envmap import env_eval, env_pdf, env_sample
 from .lights import direction_to, sample_discrete, sample_triangle_point
@@ -127,6 +127,8 @@ def make_render_pixel(features):
     NEE = ANY_LIGHTS or ENV_MAP
     # Shading normals that differ from the geometric ones: fold lobes (see eval_world).
     FOLD = SMOOTH or NORMAL_MAP
+    # Lambertian materials and flat shading only: the cheapest path (the Cornell box's)
+    LEAN = not PRINCIPLED and not FOLD
 
     @device
     def param1(scene, m, slot, col, u, v):
@@ -207,6 +209,14 @@ def make_render_pixel(features):
         return (dot(w, t), dot(w, s), dot(w, n))
 
     @device
+    def leave(p, ng, w, origin):
+        """Origin of a ray leaving p towards w: on w's side of the surface. Only
+        transmissive materials send rays to the other side of ng (turned to wo)."""
+        if PRINCIPLED:
+            return origin_towards(p, ng, w)
+        return origin
+
+    @device
     def consistent(wo, wo_l, w, w_l, ng):
         """Do the shading frame and the geometric surface agree on whether w is a
         reflection or a transmission of wo?"""
@@ -228,6 +238,13 @@ def make_render_pixel(features):
         original one at wi (if wi is on its proper side) plus the original one at the mirror
         image of wi (if that one was on the wrong side); sampling applies the same mirror,
         so eval, pdf and sample stay consistent."""
+        if LEAN:
+            # diffuse only, flat shading: n is ng turned to wo (bent only at grazing wo)
+            cos_i = dot(n, wi)
+            if cos_i <= ZERO or dot(ng, wi) <= ZERO:
+                return (ZERO, ZERO, ZERO), ZERO
+            k = cos_i * INV_PI
+            return (p[0] * k, p[1] * k, p[2] * k), k
         wi_l = to_local(wi, t, s, n)
         f = (ZERO, ZERO, ZERO)
         pdf = ZERO
@@ -325,15 +342,16 @@ def make_render_pixel(features):
                 break
 
             # ---- Material and shading frame ----
+            # (nested ifs on the constants: Numba prunes a branch only when its condition
+            # is a constant alone, and an unpruned branch is compiled even if never taken)
             is_principled = False
+            alb = param3(scene, m, T_ALBEDO, 0, tu, tv)
+            bp = (alb[0], alb[1], alb[2], ZERO, ZERO, ONE, ZERO, ZERO, ZERO, ZERO,
+                  ZERO, ZERO, ZERO, ZERO)
             if PRINCIPLED:
                 is_principled = scene.mat[m, M_TYPE] == MAT_PRINCIPLED
-            if PRINCIPLED and is_principled:
-                bp = material_params(scene, m, tu, tv)
-            else:
-                alb = param3(scene, m, T_ALBEDO, 0, tu, tv)
-                bp = (alb[0], alb[1], alb[2], ZERO, ZERO, ONE, ZERO, ZERO, ZERO, ZERO,
-                      ZERO, ZERO, ZERO, ZERO)
+                if is_principled:
+                    bp = material_params(scene, m, tu, tv)
             # A transmissive material is an interface with an inside: its frame keeps the
             # geometric front side. Anything else reflects on both sides: turn to wo.
             side = ONE
@@ -348,6 +366,7 @@ def make_render_pixel(features):
                 if dot(ns, ng) < ZERO:
                     ns = neg(ns)
             tangent = (ZERO, ZERO, ZERO)
+            bitangent = (ZERO, ZERO, ZERO)
             has_tangent = False
             if TANGENTS:
                 b0 = ONE - b1 - b2
@@ -401,84 +420,95 @@ def make_render_pixel(features):
                 else:
                     tangent, _ = frame(ns)
             else:
-                tangent, _ = frame(ns)   # isotropic BSDFs only: any tangent will do
-            bitangent = cross(ns, tangent)
-            wo_l = to_local(wo, tangent, bitangent, ns)
+                tangent, bitangent = frame(ns)   # isotropic BSDFs only: any tangent will do
+            if PRINCIPLED or TANGENTS:
+                bitangent = cross(ns, tangent)
+            if LEAN:
+                wo_l = (ZERO, ZERO, ONE)     # unused by the Lambertian lobe but its side
+            else:
+                wo_l = to_local(wo, tangent, bitangent, ns)
+            origin = offset_origin(p, ng)   # the side of wo (every ray, without transmission)
             dim = D_FIRST_BOUNCE + bounce * DIMS_PER_BOUNCE
 
             # ---- Next-event estimation: the environment, or one light chosen by power ----
+            # (nested ifs on constants, so that unused strategies are not compiled; inline,
+            # because a call that passes the scene's arrays costs more than the work)
             if NEE:
                 u_sel = sample_1d(key, dim + D_LIGHT_SELECT)
                 u1 = sample_1d(key, dim + D_LIGHT_U)
                 u2 = sample_1d(key, dim + D_LIGHT_V)
-                pick_env = False
+                do_lights = True
                 if ENV_MAP:
                     if u_sel < p_env:
-                        pick_env = True
+                        do_lights = False
+                        wi, pdf_dir = env_sample(scene.env_marg, scene.env_cond, scene.env_pdf,
+                                                 scene.env_info, u1, u2)
+                        if pdf_dir > ZERO:
+                            f, pdf_bsdf = eval_world(is_principled, bp, wo, wo_l, wi, tangent,
+                                                     bitangent, ns, ng)
+                            if max_comp(f) > ZERO:
+                                n_shadow_rays += 1
+                                if not any_hit(leave(p, ng, wi, origin), wi, INF, tri, -1,
+                                               scene.tri_v, scene.bvh_box, scene.bvh_child,
+                                               stack):
+                                    pdf_light = p_env * pdf_dir
+                                    weight = power_heuristic(pdf_light, pdf_bsdf) / pdf_light
+                                    le = env_eval(scene.env_img, scene.env_info, wi)
+                                    radiance = add(radiance, scale(mul(mul(beta, f), le), weight))
+
                     else:
                         u_sel = min((u_sel - p_env) / (ONE - p_env), ONE_MINUS_EPS)
-                if ENV_MAP and pick_env:
-                    wi, pdf_dir = env_sample(scene.env_marg, scene.env_cond, scene.env_pdf,
-                                             scene.env_info, u1, u2)
-                    if pdf_dir > ZERO:
-                        f, pdf_bsdf = eval_world(is_principled, bp, wo, wo_l, wi, tangent,
-                                                 bitangent, ns, ng)
-                        if max_comp(f) > ZERO:
-                            n_shadow_rays += 1
-                            if not any_hit(origin_towards(p, ng, wi), wi, INF, tri, -1,
-                                           scene.tri_v, scene.bvh_box, scene.bvh_child,
-                                           stack):
-                                pdf_light = p_env * pdf_dir
-                                weight = power_heuristic(pdf_light, pdf_bsdf) / pdf_light
-                                le = env_eval(scene.env_img, scene.env_info, wi)
-                                radiance = add(radiance, scale(mul(mul(beta, f), le), weight))
-                elif ANY_LIGHTS:
-                    k = sample_discrete(scene.light_cdf, u_sel)
-                    ref = scene.light_ref[k]
-                    if TRI_LIGHTS and ref >= 0:
-                        q, nl, _ = sample_triangle_point(scene.tri_v, ref, u1, u2)
-                        wi, dist = direction_to(p, q)
-                        cos_l = -dot(nl, wi)
-                        lm = scene.tri_mat[ref]
-                        # tri_light_pdf = selection pmf / area: the same density the
-                        # emission-hit MIS above uses (0 for zero-area triangles).
-                        pdf_area = scene.tri_light_pdf[ref]
-                        if dist > ZERO and pdf_area > ZERO and emits(scene.mat, lm, cos_l):
-                            f, pdf_bsdf = eval_world(is_principled, bp, wo, wo_l, wi,
-                                                     tangent, bitangent, ns, ng)
-                            if max_comp(f) > ZERO:
-                                n_shadow_rays += 1
-                                if not any_hit(origin_towards(p, ng, wi), wi,
-                                               dist * SHADOW_SHORTEN, tri, ref, scene.tri_v,
-                                               scene.bvh_box, scene.bvh_child, stack):
-                                    pdf_light = pdf_area * dist * dist / abs(cos_l)
-                                    weight = power_heuristic(pdf_light, pdf_bsdf) / pdf_light
-                                    lu, lv = ZERO, ZERO
-                                    if TEXTURES:
-                                        # texture coordinates of the light sample point
-                                        lb1, lb2 = light_barycentrics(scene, ref, q)
-                                        lu, lv = tri_uv_at(scene, ref, lb1, lb2)
-                                    radiance = add(radiance, scale(
-                                        mul(mul(beta, f), emitted(scene, lm, lu, lv)),
-                                        weight))
-                    if POINT_LIGHTS and ref < 0:
-                        pl = -ref - 1
-                        pmf = scene.light_cdf[k + 1] - scene.light_cdf[k]
-                        if ENV_MAP:
-                            pmf *= ONE - p_env
-                        wi, dist = direction_to(p, load3(scene.point_lights, pl, 0))
-                        if dist > ZERO:
-                            f, pdf_bsdf = eval_world(is_principled, bp, wo, wo_l, wi,
-                                                     tangent, bitangent, ns, ng)
-                            if max_comp(f) > ZERO:
-                                n_shadow_rays += 1
-                                if not any_hit(origin_towards(p, ng, wi), wi,
-                                               dist * SHADOW_SHORTEN, tri, -1, scene.tri_v,
-                                               scene.bvh_box, scene.bvh_child, stack):
-                                    # Delta light: no MIS; irradiance falls off with 1/d^2.
-                                    radiance = add(radiance, scale(
-                                        mul(mul(beta, f), load3(scene.point_lights, pl, 3)),
-                                        ONE / (pmf * dist * dist)))
+                if ANY_LIGHTS:
+                    if do_lights:
+                        k = sample_discrete(scene.light_cdf, u_sel)
+                        ref = scene.light_ref[k]
+                        if TRI_LIGHTS:
+                            if ref >= 0:
+                                q, nl, _ = sample_triangle_point(scene.tri_v, ref, u1, u2)
+                                wi, dist = direction_to(p, q)
+                                cos_l = -dot(nl, wi)
+                                lm = scene.tri_mat[ref]
+                                # tri_light_pdf = selection pmf / area: the same density the
+                                # emission-hit MIS above uses (0 for zero-area triangles).
+                                pdf_area = scene.tri_light_pdf[ref]
+                                if dist > ZERO and pdf_area > ZERO and emits(scene.mat, lm, cos_l):
+                                    f, pdf_bsdf = eval_world(is_principled, bp, wo, wo_l, wi,
+                                                             tangent, bitangent, ns, ng)
+                                    if max_comp(f) > ZERO:
+                                        n_shadow_rays += 1
+                                        if not any_hit(leave(p, ng, wi, origin), wi,
+                                                       dist * SHADOW_SHORTEN, tri, ref, scene.tri_v,
+                                                       scene.bvh_box, scene.bvh_child, stack):
+                                            pdf_light = pdf_area * dist * dist / abs(cos_l)
+                                            weight = power_heuristic(pdf_light, pdf_bsdf) / pdf_light
+                                            lu, lv = ZERO, ZERO
+                                            if TEXTURES:
+                                                # texture coordinates of the light sample point
+                                                lb1, lb2 = light_barycentrics(scene, ref, q)
+                                                lu, lv = tri_uv_at(scene, ref, lb1, lb2)
+                                            radiance = add(radiance, scale(
+                                                mul(mul(beta, f), emitted(scene, lm, lu, lv)),
+                                                weight))
+                        if POINT_LIGHTS:
+                            if ref < 0:
+                                pl = -ref - 1
+                                pmf = scene.light_cdf[k + 1] - scene.light_cdf[k]
+                                if ENV_MAP:
+                                    pmf *= ONE - p_env
+                                wi, dist = direction_to(p, load3(scene.point_lights, pl, 0))
+                                if dist > ZERO:
+                                    f, pdf_bsdf = eval_world(is_principled, bp, wo, wo_l, wi,
+                                                             tangent, bitangent, ns, ng)
+                                    if max_comp(f) > ZERO:
+                                        n_shadow_rays += 1
+                                        if not any_hit(leave(p, ng, wi, origin), wi,
+                                                       dist * SHADOW_SHORTEN, tri, -1, scene.tri_v,
+                                                       scene.bvh_box, scene.bvh_child, stack):
+                                            # Delta light: no MIS; irradiance falls off with 1/d^2.
+                                            radiance = add(radiance, scale(
+                                                mul(mul(beta, f), load3(scene.point_lights, pl, 3)),
+                                                ONE / (pmf * dist * dist)))
+
 
             # ---- BSDF sampling: the next ray ----
             wi_l, weight, pdf_bsdf = bsdf_sample(is_principled, bp, wo_l,
@@ -487,8 +517,11 @@ def make_render_pixel(features):
                                                  sample_1d(key, dim + D_BSDF_V))
             if not (pdf_bsdf > ZERO):
                 break
-            wi = normalize(to_world(wi_l, tangent, bitangent, ns))
-            if not consistent(wo, wo_l, wi, wi_l, ng):
+            wi = to_world(wi_l, tangent, bitangent, ns)   # unit: orthonormal frame
+            if LEAN:
+                if dot(ng, wi) <= ZERO:
+                    break
+            elif not consistent(wo, wo_l, wi, wi_l, ng):
                 if not FOLD:
                     break   # the shading frame and the surface disagree: absorbed
                 # folded back across the surface (see eval_world)
@@ -501,7 +534,7 @@ def make_render_pixel(features):
                 weight = scale(f, ONE / pdf_bsdf)
             beta = mul(beta, weight)
             pdf_prev = pdf_bsdf
-            o = origin_towards(p, ng, wi)
+            o = leave(p, ng, wi, origin)
             d = wi
             skip = tri
             bounce += 1
