@@ -123,3 +123,37 @@ def test_scale_and_position_invariance(tmp_path, name, transform, cam_map):
     # per pixel: the difference to the plain image is no larger than between two seeds
     a2 = run(plain, "cpu", spp=64, seed=2).film.image()
     assert ((a - b) ** 2).mean() < 1.3 * ((a - a2) ** 2).mean(), name
+
+
+
+def test_shadow_terminator_lift_reaches_the_smooth_surface():
+    """On a coarse sphere (vertices on the unit sphere, exact vertex normals) the lifted
+    point moves outwards only and lands closer to the sphere than the facet point; on a
+    flat patch (equal normals) it does not move."""
+    from pathtracer.kernels.integrator import terminator_lift
+    rng = np.random.default_rng(4)
+    ratios = []
+    for _ in range(200):
+        v = rng.normal(size=(3, 3))
+        v /= np.linalg.norm(v, axis=1, keepdims=True)
+        v = v[0] + 0.5 * (v - v[0])          # a facet of about 30 degrees
+        v /= np.linalg.norm(v, axis=1, keepdims=True)
+        e1, e2 = v[1] - v[0], v[2] - v[0]
+        ng = np.cross(e1, e2)
+        ng /= np.linalg.norm(ng)
+        if ng @ v[0] < 0:
+            ng = -ng
+        b1, b2 = rng.random(2) * 0.5
+        p = v[0] + b1 * e1 + b2 * e2
+        f = lambda x: tuple(F(c) for c in x)
+        q = np.array(terminator_lift(f(p), F(b1), F(b2), f(v[0]), f(e1), f(e2), f(v[0]),
+                                     f(v[1]), f(v[2]), f(ng)))
+        gap = 1 - np.linalg.norm(p)
+        assert (q - p) @ ng >= -1e-6                      # outwards only
+        ratios.append(abs(1 - np.linalg.norm(q)) / gap)
+    # distance to the true surface: 0.58 of the facet point's on average (measured), never
+    # worse; without the lift the ratio is 1
+    assert np.mean(ratios) < 0.7 and np.max(ratios) < 1.0, (np.mean(ratios), np.max(ratios))
+    flat = terminator_lift(f(p), F(0.2), F(0.3), f(v[0]), f(e1), f(e2), f(ng), f(ng), f(ng),
+                           f(ng))
+    assert np.allclose(flat, p, atol=1e-6)

@@ -103,11 +103,24 @@ def offset_origin(p, n):
 
 
 @device
-def origin_towards(p, ng, w):
-    """Ray origin for leaving p in direction w: offset to w's side of the surface."""
-    if dot(ng, w) >= ZERO:
-        return offset_origin(p, ng)
-    return offset_origin(p, neg(ng))
+def _lift_term(p, vk, nk, ng, bk):
+    if dot(nk, ng) < ZERO:
+        nk = neg(nk)
+    h = min(dot((p[0] - vk[0], p[1] - vk[1], p[2] - vk[2]), nk), ZERO)
+    return scale(nk, -bk * h)
+
+
+@device
+def terminator_lift(p, b1, b2, v0, e1, e2, n0, n1, n2, ng):
+    """Shadow terminator (Hanika 2021, "Hacking the Shadow Terminator", Ray Tracing Gems II
+    ch. 4): the point p of a smooth-shaded triangle lifted onto the curved surface its vertex
+    normals describe (the barycentric mean of p's projections onto the vertices' tangent
+    planes, only ever outwards, towards ng). Rays leaving on ng's side start there, so that a
+    coarse smooth mesh shadows itself less in flat facets."""
+    b0 = ONE - b1 - b2
+    lift = add(add(_lift_term(p, v0, n0, ng, b0), _lift_term(p, add(v0, e1), n1, ng, b1)),
+               _lift_term(p, add(v0, e2), n2, ng, b2))
+    return add(p, lift)
 
 
 @functools.lru_cache(maxsize=None)
@@ -213,7 +226,8 @@ def make_render_pixel(features):
         """Origin of a ray leaving p towards w: on w's side of the surface. Only
         transmissive materials send rays to the other side of ng (turned to wo)."""
         if PRINCIPLED:
-            return origin_towards(p, ng, w)
+            if dot(ng, w) < ZERO:
+                return offset_origin(p, neg(ng))
         return origin
 
     @device
@@ -427,7 +441,12 @@ def make_render_pixel(features):
                 wo_l = (ZERO, ZERO, ONE)     # unused by the Lambertian lobe but its side
             else:
                 wo_l = to_local(wo, tangent, bitangent, ns)
-            origin = offset_origin(p, ng)   # the side of wo (every ray, without transmission)
+            p_out = p
+            if SMOOTH:
+                p_out = terminator_lift(p, b1, b2, v0, e1, e2, load3(scene.tri_n, tri, 0),
+                                        load3(scene.tri_n, tri, 3), load3(scene.tri_n, tri, 6),
+                                        ng)
+            origin = offset_origin(p_out, ng)   # the side of wo (all rays, but transmission)
             dim = D_FIRST_BOUNCE + bounce * DIMS_PER_BOUNCE
 
             # ---- Next-event estimation: the environment, or one light chosen by power ----
