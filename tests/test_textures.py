@@ -174,3 +174,23 @@ def test_thesis_folder_missing_files_are_named(tmp_path):
     assert s.n_triangles > 10000
     assert any("missing" in w for w in s.description.warnings)
     assert any("unit suffix" in w for w in s.description.warnings)
+
+
+@pytest.mark.parametrize("ext", ["png", "jpg", "bmp", "hdr"])
+def test_texture_formats(tmp_path, ext):
+    """PNG, JPG, BMP (the thesis renderer's format) and Radiance HDR all read, with the
+    right orientation (row 0 is the top: v = 1)."""
+    from pathtracer.imageio_utils import write_image
+    from pathtracer.scene.images import load_texture
+    from pathtracer.scene.loader import TextureSpec
+    img = np.zeros((16, 16, 3), np.uint8)
+    img[:8] = [200, 100, 50]           # top half
+    path = str(tmp_path / f"t.{ext}")
+    if ext == "hdr":
+        write_image(path, img.astype(np.float32) / 255)
+    else:
+        iio.imwrite(path, img, **({"quality": 100} if ext == "jpg" else {}))
+    texels = load_texture(TextureSpec(path=path, color_space="linear"))
+    assert texels.shape == (16, 16, 3)
+    assert np.allclose(texels[2, 8], np.array([200, 100, 50]) / 255, atol=0.03)
+    assert np.allclose(texels[13, 8], 0, atol=0.03)
