@@ -23,6 +23,7 @@ import numpy as np
 
 from .constants import HALF, ONE, PI, TWO_PI, ZERO
 from .device import device
+from .lights import sample_discrete
 from .warps import sincos
 
 INV_TWO_PI = np.float32(1.0 / (2.0 * np.pi))
@@ -93,37 +94,14 @@ def env_pdf(env_pdf_arr, env_info, d):
 
 
 @device
-def _search(cdf, row, n, u):
-    """Index k in [0, n) with cdf[row, k] <= u < cdf[row, k + 1]."""
-    lo = 0
-    hi = n
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if cdf[row, mid] <= u:
-            lo = mid
-        else:
-            hi = mid
-    return lo
-
-
-@device
 def env_sample(env_marg, env_cond, env_pdf_arr, env_info, u1, u2):
     """(direction, solid-angle pdf); pdf = 0 means no sample."""
     h = env_pdf_arr.shape[0]
     w = env_pdf_arr.shape[1]
-    # rows: the marginal is stored as a (1, H + 1) view-compatible 1-D array
-    lo = 0
-    hi = h
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if env_marg[mid] <= u1:
-            lo = mid
-        else:
-            hi = mid
-    j = lo
+    j = sample_discrete(env_marg, u1)
     span = env_marg[j + 1] - env_marg[j]
     fv = (u1 - env_marg[j]) / span if span > ZERO else HALF
-    i = _search(env_cond, j, w, u2)
+    i = sample_discrete(env_cond[j], u2)
     span = env_cond[j, i + 1] - env_cond[j, i]
     fu = (u2 - env_cond[j, i]) / span if span > ZERO else HALF
     fv = min(max(fv, ZERO), ONE)

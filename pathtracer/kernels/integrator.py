@@ -103,6 +103,15 @@ def offset_origin(p, n):
 
 
 @device
+def tangent_on(t, n):
+    """t made orthogonal to the unit normal n and normalised; any tangent if t is along n."""
+    t = madd(t, n, -dot(t, n))
+    if dot(t, t) > ZERO:
+        return normalize(t)
+    return frame(n)[0]
+
+
+@device
 def _lift_term(p, vk, nk, ng, bk):
     if dot(nk, ng) < ZERO:
         nk = neg(nk)
@@ -419,20 +428,12 @@ def make_render_pixel(features):
             if c_o < HORIZON_EPS:
                 ns = normalize(madd(ns, wo, s_o * (HORIZON_EPS - c_o)))
             if has_tangent:
-                tangent = madd(tangent, ns, -dot(tangent, ns))
-                if dot(tangent, tangent) > ZERO:
-                    tangent = normalize(tangent)
-                else:
-                    tangent, _ = frame(ns)
+                tangent = tangent_on(tangent, ns)
             elif PRINCIPLED:
                 # Without texture coordinates the tangent is dp/du of the triangle's
                 # barycentric parameterisation, its first edge, projected onto the shading
                 # normal: Mitsuba 3's choice, so that anisotropy can be checked against it.
-                tangent = madd(e1, ns, -dot(e1, ns))
-                if dot(tangent, tangent) > ZERO:
-                    tangent = normalize(tangent)
-                else:
-                    tangent, _ = frame(ns)
+                tangent = tangent_on(e1, ns)
             else:
                 tangent, bitangent = frame(ns)   # isotropic BSDFs only: any tangent will do
             if PRINCIPLED or TANGENTS:
