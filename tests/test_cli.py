@@ -114,3 +114,17 @@ def test_atomic_write_never_partial(tmp_path):
         write_image(path, a * (k % 2))
         assert read_image(path).shape == (64, 64, 3)
     assert not [f for f in os.listdir(tmp_path) if f.startswith(".tmp")]
+
+
+@pytest.mark.skipif(not os.path.isdir(os.path.join(os.path.dirname(ROOT), "shared")) and
+                    not os.environ.get("PT_RENDER_SHARED"), reason="needs ../shared")
+def test_thesis_folder_missing_files_and_allow_missing(tmp_path):
+    from tests.conftest import SHARED
+    folder = os.path.join(SHARED, "assets", "seed-scenes", "ClockCC0")
+    r = pt_render(folder, "-o", tmp_path / "c.png", "--quiet")
+    assert r.returncode == 2
+    assert "plant.obj" in r.stderr and "hdri.hdr" in r.stderr and "--allow-missing" in r.stderr
+    r = pt_render(folder, "-o", tmp_path / "c.png", "--quiet", "--allow-missing",
+                  "--resolution", "32x18", "--spp", "1", "--backend", "cpu")
+    assert r.returncode == 0, r.stderr
+    assert "warning" in r.stderr and (tmp_path / "c.png").exists()
