@@ -54,7 +54,10 @@ def now():
 
 
 def command():
-    return "python " + " ".join([os.path.relpath(sys.argv[0], ROOT)] + sys.argv[1:])
+    script = os.path.relpath(sys.argv[0], ROOT)
+    if script == os.path.join("bench", "__main__.py"):
+        script = "-m bench"
+    return "python " + " ".join([script] + sys.argv[1:])
 
 
 def median_time(fn, repeats):

@@ -1,0 +1,69 @@
+"""The benchmark's metrics and its quick mode (a tiny run, as CI runs it)."""
+import csv
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from bench.metrics import rays_per_second, relmse, time_to_threshold
+from tests.conftest import ROOT, needs_shared
+
+
+def test_relmse():
+    ref = np.full((4, 4, 3), 2.0)
+    assert relmse(ref, ref) == 0
+    img = ref * 1.1          # 10% everywhere: (0.2^2) / (4 + 0.01)
+    assert relmse(img, ref) == pytest.approx(0.04 / 4.01)
+    # dark pixels are not blown up: eps = 0.01 in the denominator
+    assert relmse(np.full((2, 2, 3), 0.1), np.zeros((2, 2, 3))) == pytest.approx(1.0)
+
+
+def test_time_to_threshold_interpolates_in_log_log():
+    t = [1.0, 2.0, 4.0, 8.0]
+    e = [1e-1, 5e-2, 2.5e-2, 1.25e-2]            # error = 0.1 / t
+    assert time_to_threshold(t, e, 5e-2) == pytest.approx(2.0)
+    assert time_to_threshold(t, e, 0.035355) == pytest.approx(2 * math.sqrt(2), rel=1e-4)
+    assert time_to_threshold(t, e, 1e-3) is None          # never reached: no extrapolation
+    assert time_to_threshold(t, e, 1.0) == 1.0             # reached at the first point
+    assert time_to_threshold([1, 2, 3], [0.5, 0.05, 0.2], 0.1) == pytest.approx(
+        math.exp(math.log(2) * (math.log(0.1) - math.log(0.5)) / (math.log(0.05) -
+                                                                   math.log(0.5))))
+
+
+def test_rays_per_second_counts_every_ray():
+    assert rays_per_second(100, 250, 180, 2.0) == pytest.approx(265.0)
+    with pytest.raises(ValueError):
+        rays_per_second(1, 1, 1, 0)
+
+
+def test_counted_rays_match_a_traced_path(tmp_path):
+    """The kernels' ray counters: inside a closed diffuse shell with a point light at its
+    centre (always visible, never behind the surface) and no Russian roulette, every path
+    scatters maxBounces times, tracing one shadow ray and one bounce ray per event."""
+    from pathtracer.backends import make_backend
+    from pathtracer.scene import load_scene
+    from tests.scenes import furnace_scene, write_scene
+    d = furnace_scene(0.5, 0.0, 3, res=(4, 4))
+    d["lights"] = [{"position": [0, 0, 0], "intensity": 1}]
+    d["render"]["rrDepth"] = 100
+    s = load_scene(write_scene(tmp_path, d))
+    _, stats = make_backend("cpu", s).render_pass(0, 2, 0, 3, 100)
+    per_path = stats.reshape(-1, 3).sum(0) / (4 * 4 * 2)
+    assert per_path[0] == 3 and per_path[1] == 3, per_path
+
+
+@needs_shared
+def test_quick_mode_writes_csv_plot_and_summary(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "bench", "--quick", "--tiny", "--out",
+                        str(tmp_path)], capture_output=True, text=True, cwd=ROOT, timeout=900)
+    assert r.returncode == 0, r.stderr[-3000:]
+    rows = list(csv.DictReader(open(tmp_path / "results.csv")))
+    sections = {row["section"] for row in rows}
+    assert {"convergence", "throughput", "compile"} <= sections
+    for row in rows:
+        assert row["command"] and row["machine"] and row["date"]
+    assert (tmp_path / "convergence.png").stat().st_size > 1000
+    summary = (tmp_path / "summary.md").read_text()
+    assert "relMSE" in summary and "paths/s" in summary
