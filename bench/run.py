@@ -124,7 +124,14 @@ def section_convergence(res, backends, mitsuba_variant, max_spp, r):
 
 
 def _plot_convergence(curves, path, res):
-    import matplotlib
+    """Log-log relMSE against seconds; skipped (with a message) without matplotlib: the CSV
+    holds the data, and `python -m bench --replot DIR` draws it later."""
+    try:
+        import matplotlib
+    except ImportError:
+        print("bench: matplotlib not installed: no plot (python -m bench --replot DIR)",
+              file=sys.stderr)
+        return
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -139,6 +146,19 @@ def _plot_convergence(curves, path, res):
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def curves_from_csv(paths):
+    """{renderer: [(seconds, spp, relMSE)]} from the convergence rows of results.csv files."""
+    data = {}
+    for path in paths:
+        for row in csv.DictReader(open(path)):
+            if row["section"] != "convergence" or row["parameter"] != "spp":
+                continue
+            d = data.setdefault(row["renderer"], {}).setdefault(int(row["value"]), {})
+            d[row["metric"]] = float(row["result"])
+    return {name: [(v["seconds"], spp, v["relMSE"]) for spp, v in sorted(pts.items())]
+            for name, pts in data.items()}
 
 
 # ---------------------------------------------------------------------------------------
@@ -269,7 +289,14 @@ def main(argv=None):
     p.add_argument("--out", help="output folder (default bench/out/<date>)")
     p.add_argument("--sections", nargs="*", default=SECTIONS, choices=SECTIONS,
                    help="run only these")
+    p.add_argument("--replot", nargs="+", metavar="CSV",
+                   help="only draw convergence.png (in --out) from these results.csv files")
     args = p.parse_args(argv)
+    if args.replot:
+        out = args.out or os.path.dirname(os.path.abspath(args.replot[0]))
+        _plot_convergence(curves_from_csv(args.replot), os.path.join(out, "convergence.png"),
+                          (256, 256))
+        return 0
     stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%d-%H%M%S")
     out = args.out or os.path.join(ROOT, "bench", "out", stamp)
     os.makedirs(out, exist_ok=True)

@@ -67,3 +67,14 @@ def test_quick_mode_writes_csv_plot_and_summary(tmp_path):
     assert (tmp_path / "convergence.png").stat().st_size > 1000
     summary = (tmp_path / "summary.md").read_text()
     assert "relMSE" in summary and "paths/s" in summary
+
+
+def test_replot_reads_the_csv(tmp_path):
+    from bench.run import Results, curves_from_csv
+    r = Results(str(tmp_path))
+    for spp, sec, err in ((1, 0.1, 0.3), (2, 0.2, 0.15)):
+        r.add("convergence", "cornell-box", "x", "relMSE", err, "", "spp", spp)
+        r.add("convergence", "cornell-box", "x", "seconds", sec, "s", "spp", spp)
+    r.write()
+    assert curves_from_csv([str(tmp_path / "results.csv")]) == {
+        "x": [(0.1, 1, 0.3), (0.2, 2, 0.15)]}
