@@ -9,7 +9,8 @@ import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
-SHARED = os.path.join(os.path.dirname(ROOT), "shared")
+# ../shared beside the clone; PT_RENDER_SHARED points elsewhere (the GPU machine gets a copy)
+SHARED = os.environ.get("PT_RENDER_SHARED") or os.path.join(os.path.dirname(ROOT), "shared")
 CORNELL = os.path.join(ROOT, "scenes", "cornell-box.json")
 CORNELL_REF = os.path.join(SHARED, "reference", "cornell-box", "reference_256_d8.npy")
 
