@@ -29,7 +29,7 @@ from bench.metrics import rays_per_second, relmse, time_to_threshold  # noqa: E4
 FIELDS = ["section", "scene", "renderer", "parameter", "value", "metric", "result", "unit",
           "command", "machine", "date"]
 THRESHOLDS = (1e-2, 1e-3)
-SECTIONS = ("convergence", "throughput", "filtering", "blocks", "compile")
+SECTIONS = ("convergence", "throughput", "filtering", "blocks", "bvh", "compile")
 
 
 class Results:
@@ -220,6 +220,71 @@ def section_blocks(res, spp, repeats, r):
     return out
 
 
+def _mesh_scene_desc(obj, res):
+    """A mesh (scaled to unit size) in a white furnace-like setting: diffuse 0.8, a constant
+    sky, seen whole; 3 bounces. Traversal dominates its cost."""
+    from pathtracer.scene import load_scene_description
+    from pathtracer.scene.meshes import load_obj
+    import json
+    import tempfile
+    pos = load_obj(obj).positions.reshape(-1, 3)
+    lo, hi = pos.min(0), pos.max(0)
+    size = float((hi - lo).max())
+    centre = ((lo + hi) / 2).tolist()
+    scene = {"camera": {"resolution": list(res), "position": [0.3, 0.4, 2.2],
+                        "lookAt": [0, 0, 0], "fov": 35},
+             "render": {"maxBounces": 3},
+             "materials": [{"name": "m", "type": "diffuse", "albedo": 0.8}],
+             "objects": [{"name": "o", "file": obj, "material": "m", "smooth": False,
+                          "transform": {"matrix": [
+                              [1 / size, 0, 0, -centre[0] / size],
+                              [0, 1 / size, 0, -centre[1] / size],
+                              [0, 0, 1 / size, -centre[2] / size], [0, 0, 0, 1]]}}],
+             "environment": {"color": 1.0}}
+    with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as f:
+        json.dump(scene, f)
+    desc = load_scene_description(f.name)
+    os.unlink(f.name)
+    return desc
+
+
+def section_bvh(backend_name, meshes, res, spp, repeats, variants, r):
+    """The thesis's evaluation with clear metrics: build time, SAH cost, nodes and traversal
+    speed (camera paths/s) for brute force (one leaf), midpoint splits, and binned SAH over
+    bin counts and leaf sizes."""
+    from pathtracer.accel.bvh import sah_cost
+    from pathtracer.backends import make_backend
+    from pathtracer.scene import compile_scene
+    out = []
+    for label, obj, brute in meshes:
+        desc = _mesh_scene_desc(obj, res)
+        for name, options in variants:
+            if options.get("split") == "none" and not brute:
+                continue
+            builds = []
+            for _ in range(3):
+                scene = compile_scene(desc, bvh_options=options)
+                builds.append(scene.timings["bvh_build"])
+            from pathtracer.accel import build_bvh
+            cost = sah_cost(build_bvh(_positions(scene), **options))
+            t = _pass_time(make_backend(backend_name, scene), scene, spp, repeats)
+            pps = res[0] * res[1] * spp / t
+            row = dict(mesh=label, triangles=scene.n_triangles, variant=name,
+                       build_s=float(np.median(builds)), sah_cost=cost,
+                       nodes=len(scene.arrays.bvh_box), paths_per_s=pps)
+            out.append(row)
+            for k in ("build_s", "sah_cost", "nodes", "paths_per_s"):
+                r.add("bvh", label, f"pt-render {backend_name}", k, row[k], "", "variant", name)
+    return out
+
+
+def _positions(scene):
+    """Triangle vertices (N, 3, 3) back from the compiled v0, e1, e2 rows."""
+    tv = scene.arrays.tri_v[:scene.n_triangles].astype(np.float32)
+    v0 = tv[:, 0:3]
+    return np.stack([v0, v0 + tv[:, 3:6], v0 + tv[:, 6:9]], axis=1)
+
+
 def section_compile(backends, r):
     from bench.throughput import compile_times
     out = {}
@@ -238,7 +303,7 @@ def section_compile(backends, r):
 
 # ---------------------------------------------------------------------------------------
 
-def summary(r, curves, thr, filt, blocks, comp, args):
+def summary(r, curves, thr, filt, blocks, bvh, comp, args):
     lines = [f"# Benchmark run ({r.context['date']})", "",
              f"- command: `{r.context['command']}`", f"- machine: {r.context['machine']}",
              f"- versions: {versions()}", "",
@@ -269,6 +334,14 @@ def summary(r, curves, thr, filt, blocks, comp, args):
         lines += ["", "## CUDA block sizes (Cornell box)", "", "| block | M camera paths/s |",
                   "|---|---|"]
         lines += [f"| {b[0]}x{b[1]} | {v / 1e6:.4g} |" for b, v in blocks.items()]
+    if bvh:
+        lines += ["", "## BVH (thesis evaluation, clear metrics)", "",
+                  "| mesh | triangles | variant | build s | SAH cost | nodes | M camera paths/s |",
+                  "|---|---|---|---|---|---|---|"]
+        for b in bvh:
+            lines.append(f"| {b['mesh']} | {b['triangles']} | {b['variant']} | "
+                         f"{b['build_s']:.3g} | {b['sah_cost']:.3g} | {b['nodes']} | "
+                         f"{b['paths_per_s'] / 1e6:.3g} |")
     lines += ["", "## Compile times (Cornell box, fresh processes)", "",
               "| backend | cache | compile s | to first pixel s |", "|---|---|---|---|"]
     for b, rec in comp.items():
@@ -320,9 +393,26 @@ def main(argv=None):
             if "filtering" in want else {})
     blocks = (section_blocks((1024, 1024), 16, repeats, r)
               if args.gpu and "blocks" in want else {})
+    bvh = []
+    if "bvh" in want:
+        from bench.common import SHARED
+        models = os.path.join(SHARED, "assets", "models")
+        meshes = [("suzanne", os.path.join(models, "suzanne.obj"), True),
+                  ("bunny-lowres", os.path.join(models, "stanford_bunny_lowres.obj"), True)]
+        if not args.tiny:
+            meshes += [("dragon-100k", os.path.join(models, "stanford_dragon_100k.obj"),
+                        args.gpu)]
+        variants = [("brute force", dict(split="none")), ("midpoint", dict(split="midpoint")),
+                    ("SAH 16 bins, leaf 8", dict())]
+        if not args.tiny:
+            variants += [(f"SAH {b} bins, leaf 8", dict(n_bins=b)) for b in (4, 8, 12, 32)]
+            variants += [(f"SAH 16 bins, leaf {k}", dict(max_leaf=k)) for k in (1, 2, 4, 16)]
+        bres = (32, 32) if args.tiny else ((256, 256) if args.gpu else (96, 96))
+        bvh = section_bvh(backends[0], meshes, bres, 1 if args.tiny else 4, repeats,
+                          variants, r)
     comp = section_compile(backends, r) if "compile" in want else {}
     r.write()
-    summary(r, curves, thr, filt, blocks, comp, args)
+    summary(r, curves, thr, filt, blocks, bvh, comp, args)
     print(f"bench: {len(r.rows)} rows in {time.perf_counter() - t0:.0f} s -> {out}",
           file=sys.stderr)
     return 0

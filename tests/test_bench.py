@@ -61,7 +61,7 @@ def test_quick_mode_writes_csv_plot_and_summary(tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     rows = list(csv.DictReader(open(tmp_path / "results.csv")))
     sections = {row["section"] for row in rows}
-    assert {"convergence", "throughput", "compile"} <= sections
+    assert {"convergence", "throughput", "filtering", "bvh", "compile"} <= sections
     for row in rows:
         assert row["command"] and row["machine"] and row["date"]
     assert (tmp_path / "convergence.png").stat().st_size > 1000

@@ -61,8 +61,8 @@ def brute_force(origins, dirs, tri_v, n_tri, skips):
     return out_t, out_i
 
 
-def check_against_brute_force(pos, origins, dirs, skips=None):
-    bvh = build_bvh(pos)
+def check_against_brute_force(pos, origins, dirs, skips=None, **options):
+    bvh = build_bvh(pos, **options)
     pos = pos[bvh.order]
     tri_v = tri_rows(pos)
     if skips is None:
@@ -193,3 +193,16 @@ def test_coincident_centroids():
     origins, dirs = random_rays(rng, 500, pos.reshape(-1, 3).min(0), pos.reshape(-1, 3).max(0))
     bvh, _, _ = check_against_brute_force(pos, origins, dirs)
     check_structure(bvh, pos)
+
+
+@pytest.mark.parametrize("options", [dict(split="midpoint"), dict(split="none"),
+                                     dict(n_bins=4, max_leaf=1), dict(n_bins=32, max_leaf=16)])
+def test_benchmark_variants_trace_the_same(rng, options):
+    """The benchmark's variants (midpoint splits, one brute-force leaf, bin and leaf sweeps)
+    find the same hits as brute force, and are valid trees."""
+    v = (rng.random((3000, 3, 3)) * 0.1 + rng.random((3000, 1, 3))).astype(np.float32)
+    origins, dirs = random_rays(rng, 3000, v.reshape(-1, 3).min(0), v.reshape(-1, 3).max(0))
+    bvh, _, _ = check_against_brute_force(v, origins, dirs, **options)
+    check_structure(bvh, v)
+    if options.get("split") == "none":
+        assert len(bvh.box) == 1 and bvh.child[0, 1] == len(v)

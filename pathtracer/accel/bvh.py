@@ -36,7 +36,7 @@ def _area(lo, hi):
 
 
 @njit(cache=True)
-def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split):
+def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split, midpoint):
     n = tri_lo.shape[0]
     order = np.arange(n).astype(np.int32)
     max_nodes = max(1, n)
@@ -150,6 +150,21 @@ def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split):
         leaf_cost = C_INTERSECT * count
         make_leaf = count < min_leaf_split or depth >= MAX_DEPTH or (
             leaf_cost <= split_cost and count <= max_leaf)
+        if midpoint and count >= min_leaf_split and depth < MAX_DEPTH:
+            # The thesis's "plane division" (for comparison only): the middle of the
+            # centroid bounds' longest axis, leaves by size alone; SAH's choice only where
+            # the middle leaves one side empty.
+            a = 0
+            for c in range(1, 3):
+                if chi[c] - clo[c] > chi[a] - clo[a]:
+                    a = c
+            left = 0
+            for b in range(n_bins // 2):
+                left += bin_n[a, b]
+            if chi[a] - clo[a] > 0.0 and 0 < left < count:
+                best_axis = a
+                best_bin = n_bins // 2
+            make_leaf = count <= max_leaf or best_axis < 0
         mid = start
         if not make_leaf:
             if best_axis >= 0:
@@ -213,16 +228,22 @@ def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split):
     return box[:n_nodes].copy(), child[:n_nodes].copy(), order, n_nodes, max_depth
 
 
-def build_bvh(tri_verts, n_bins=16, max_leaf=8):
+def build_bvh(tri_verts, n_bins=16, max_leaf=8, split="sah"):
     """Build a BVH over triangles ``tri_verts`` (float32, N x 3 x 3).
 
+    ``split``: "sah" (binned SAH, the renderer's), or, for the benchmark's comparisons,
+    "midpoint" (middle of the longest axis) and "none" (one leaf: brute force).
     Returns a :class:`BVH`; reorder the triangle arrays with ``bvh.order`` before use.
     """
+    if split not in ("sah", "midpoint", "none"):
+        raise ValueError(f"unknown split {split!r}")
     tri_verts = np.ascontiguousarray(tri_verts, dtype=np.float32)
     tri_lo = tri_verts.min(axis=1)
     tri_hi = tri_verts.max(axis=1)
     centroid = 0.5 * (tri_lo.astype(np.float64) + tri_hi.astype(np.float64))
-    box, child, order, _, depth = _build(tri_lo, tri_hi, centroid, int(n_bins), int(max_leaf), 2)
+    min_leaf_split = len(tri_verts) + 1 if split == "none" else 2
+    box, child, order, _, depth = _build(tri_lo, tri_hi, centroid, int(n_bins), int(max_leaf),
+                                         min_leaf_split, split == "midpoint")
     return BVH(_widen(box), child, order, int(depth))
 
 

@@ -295,7 +295,9 @@ def _safe_normalize(n, fallback):
     return np.where(ok, n / np.where(ok, length, 1.0), fallback)
 
 
-def compile_scene(desc, use_cache=True):
+def compile_scene(desc, use_cache=True, bvh_options=None):
+    """Flat arrays and feature set of a scene description. ``bvh_options`` (benchmarks):
+    keyword arguments of ``accel.build_bvh`` (n_bins, max_leaf, split)."""
     t_start = time.perf_counter()
     # ---- Materials: the scene's, then each OBJ's .mtl ones, then the default grey ----
     tables = _Tables(desc.path)
@@ -405,7 +407,7 @@ def compile_scene(desc, use_cache=True):
 
     # ---- BVH; triangles reordered so each leaf is a contiguous range ----
     t0 = time.perf_counter()
-    bvh = build_bvh(pos32)
+    bvh = build_bvh(pos32, **(bvh_options or {}))
     t_bvh = time.perf_counter() - t0
     pos32 = pos32[bvh.order]
     vn = vn[bvh.order]
