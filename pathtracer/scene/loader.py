@@ -2,8 +2,8 @@
 
 Every value is checked as it is read, and every error names the file and the JSON path
 (``/materials/2/albedo``). Unknown keys are errors (pbrt's ReportUnused, Mitsuba's queried
-bit): nothing in a scene is silently ignored. Keys of the contract whose feature is not
-built yet raise a "not supported yet" error rather than rendering a different image.
+bit): nothing in a scene is silently ignored. Thesis renderer scene folders are converted
+to this format first (``scene.thesis``).
 """
 import json
 import math
@@ -16,7 +16,6 @@ import numpy as np
 
 from .errors import SceneError
 
-NOT_YET = "is not supported yet"
 
 
 # ---------------------------------------------------------------------------------------

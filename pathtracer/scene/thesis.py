@@ -157,5 +157,4 @@ def convert(folder, allow_missing=False):
                              path)
         warnings.append(f"rendering with defaults for {len(missing)} missing file(s):"
                         f"{listing}")
-    # Textures that exist but whose maps were dropped for missing ones keep their defaults.
     return out, path, warnings
