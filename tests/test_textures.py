@@ -194,3 +194,35 @@ def test_texture_formats(tmp_path, ext):
     assert texels.shape == (16, 16, 3)
     assert np.allclose(texels[2, 8], np.array([200, 100, 50]) / 255, atol=0.03)
     assert np.allclose(texels[13, 8], 0, atol=0.03)
+
+
+def test_textured_emission_equals_constant_emission(tmp_path):
+    """An emitter whose emission texture is uniformly c lights the scene exactly as one
+    with constant emission c (same seed, same light distribution): textured emission
+    reaches next-event estimation and BSDF-ray hits with its value, scale and power."""
+    c = 0.6
+    iio.imwrite(tmp_path / "e.png", np.full((4, 4, 3), 255, np.uint8))
+    lamp = tmp_path / "lamp.obj"
+    lamp.write_text("v -0.5 1 -0.5\nv 0.5 1 -0.5\nv 0.5 1 0.5\nv -0.5 1 0.5\n"
+                    "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+                    "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n")        # faces down (-y)
+    floor = tmp_path / "floor.obj"
+    floor.write_text("v -2 0 2\nv 2 0 2\nv 2 0 -2\nv -2 0 -2\nf 1 2 3\nf 1 3 4\n")
+
+    def scene(emission):
+        return {"camera": {"resolution": [16, 16], "position": [0, 2.5, 3],
+                           "lookAt": [0, 0.3, 0]},
+                "render": {"spp": 16, "maxBounces": 3},
+                "materials": [{"name": "lamp", "type": "diffuse", "albedo": 0,
+                               "emission": emission},
+                              {"name": "floor", "type": "diffuse", "albedo": 0.7}],
+                "objects": [{"name": "lamp", "file": "lamp.obj", "material": "lamp"},
+                            {"name": "floor", "file": "floor.obj", "material": "floor"}]}
+    a = load_scene(write_scene(tmp_path, scene(c), "a.json"))
+    b = load_scene(write_scene(tmp_path, scene({"texture": "e.png", "colorSpace": "linear",
+                                                "scale": c}), "b.json"))
+    assert b.features.textures and not a.features.textures
+    ia = run(a, "cpu", spp=16).film.image()
+    ib = run(b, "cpu", spp=16).film.image()
+    assert ia.mean() > 0.01
+    assert np.allclose(ia, ib, rtol=1e-4, atol=1e-6)

@@ -35,7 +35,7 @@ from .textures import tex_lookup
 from .traverse import any_hit, closest_hit
 from .vec import (add, cross, dot, frame, load3, madd, max_abs, max_comp, mul, neg,
                   normalize, scale, to_world)
-from .warps import power_heuristic
+from .warps import power_heuristic, square_to_triangle
 
 
 class Features(NamedTuple):
@@ -283,23 +283,6 @@ def make_render_pixel(features):
         return f, pdf
 
     @device
-    def light_barycentrics(scene, ref, q):
-        """Barycentric (b1, b2) of point q on triangle ref."""
-        v0 = load3(scene.tri_v, ref, 0)
-        e1 = load3(scene.tri_v, ref, 3)
-        e2 = load3(scene.tri_v, ref, 6)
-        w = (q[0] - v0[0], q[1] - v0[1], q[2] - v0[2])
-        d11 = dot(e1, e1)
-        d12 = dot(e1, e2)
-        d22 = dot(e2, e2)
-        dw1 = dot(w, e1)
-        dw2 = dot(w, e2)
-        den = d11 * d22 - d12 * d12
-        if not (den > ZERO):
-            return ZERO, ZERO
-        return (d22 * dw1 - d12 * dw2) / den, (d11 * dw2 - d12 * dw1) / den
-
-    @device
     def render_sample(px, py, sample_index, seed, width, height, max_bounces, rr_depth,
                       scene, stack):
         """Radiance (r, g, b) of one camera path through pixel (px, py), with the number of
@@ -497,14 +480,16 @@ def make_render_pixel(features):
                                     if max_comp(f) > ZERO:
                                         n_shadow_rays += 1
                                         if not any_hit(leave(p, ng, wi, origin), wi,
-                                                       dist * SHADOW_SHORTEN, tri, ref, scene.tri_v,
-                                                       scene.bvh_box, scene.bvh_child, stack):
+                                                       dist * SHADOW_SHORTEN, tri, ref,
+                                                       scene.tri_v, scene.bvh_box,
+                                                       scene.bvh_child, stack):
                                             pdf_light = pdf_area * dist * dist / abs(cos_l)
-                                            weight = power_heuristic(pdf_light, pdf_bsdf) / pdf_light
+                                            weight = power_heuristic(pdf_light,
+                                                                     pdf_bsdf) / pdf_light
                                             lu, lv = ZERO, ZERO
                                             if TEXTURES:
                                                 # texture coordinates of the light sample point
-                                                lb1, lb2 = light_barycentrics(scene, ref, q)
+                                                lb1, lb2 = square_to_triangle(u1, u2)
                                                 lu, lv = tri_uv_at(scene, ref, lb1, lb2)
                                             radiance = add(radiance, scale(
                                                 mul(mul(beta, f), emitted(scene, lm, lu, lv)),
@@ -522,13 +507,14 @@ def make_render_pixel(features):
                                     if max_comp(f) > ZERO:
                                         n_shadow_rays += 1
                                         if not any_hit(leave(p, ng, wi, origin), wi,
-                                                       dist * SHADOW_SHORTEN, tri, -1, scene.tri_v,
-                                                       scene.bvh_box, scene.bvh_child, stack):
-                                            # Delta light: no MIS; irradiance falls off with 1/d^2.
+                                                       dist * SHADOW_SHORTEN, tri, -1,
+                                                       scene.tri_v, scene.bvh_box,
+                                                       scene.bvh_child, stack):
+                                            # Delta light: no MIS; irradiance falls off as 1/d^2
+                                            le = load3(scene.point_lights, pl, 3)
                                             radiance = add(radiance, scale(
-                                                mul(mul(beta, f), load3(scene.point_lights, pl, 3)),
+                                                mul(mul(beta, f), le),
                                                 ONE / (pmf * dist * dist)))
-
 
             # ---- BSDF sampling: the next ray ----
             wi_l, weight, pdf_bsdf = bsdf_sample(is_principled, bp, wo_l,
