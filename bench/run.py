@@ -1,18 +1,23 @@
-"""The batch benchmark: error against run time, throughput, texture filtering, CUDA block
-sizes and compile times, written as CSV (every row with its command, machine and date),
-PNG plots and a markdown summary.
+"""The batch benchmark: error against run time (four scenes), throughput, texture filtering,
+CUDA block sizes, the thesis's BVH evaluation, scaling to 6.4M triangles and compile times per
+feature set, written as CSV (every row with its command, machine and date), PNG plots and a
+markdown summary.
 
     python -m bench --quick            # a few minutes on 2 CPU cores
     python -m bench                    # full CPU run
     python -m bench --gpu              # CUDA (H100 / H200), with Mitsuba's cuda variant if installed
     python -m bench --quick --tiny     # seconds: what CI runs
 
-Mitsuba 3 (`pip install -e .[bench]`) is measured in the same run where a scene can be
-expressed in it (the Cornell box), on the same device kind (llvm on the CPU, cuda on the GPU).
+Mitsuba 3 (`pip install -e .[bench]`) is measured in the same run on the scene both
+renderers express identically (the Cornell box), on the same device kind (llvm on the CPU,
+cuda on the GPU). The other scenes' references are made on a GPU by `python -m
+bench.references` and committed; the big meshes are made by shared/tools/make_big_mesh.py
+into bench/out/meshes/ on first use.
 """
 import argparse
 import csv
 import datetime
+import json
 import os
 import sys
 import time
@@ -23,13 +28,14 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
-from bench.common import CORNELL, CORNELL_REF, command, machine, now, versions  # noqa: E402
+from bench.common import command, machine, now, versions  # noqa: E402
 from bench.metrics import rays_per_second, relmse, time_to_threshold  # noqa: E402
+from bench.scenes import CONVERGENCE, convergence_desc, load_reference, mesh_desc  # noqa: E402,E501
 
 FIELDS = ["section", "scene", "renderer", "parameter", "value", "metric", "result", "unit",
           "command", "machine", "date"]
 THRESHOLDS = (1e-2, 1e-3)
-SECTIONS = ("convergence", "throughput", "filtering", "blocks", "bvh", "compile")
+SECTIONS = ("convergence", "throughput", "filtering", "blocks", "bvh", "scaling", "compile")
 
 
 class Results:
@@ -53,19 +59,13 @@ class Results:
 # ---------------------------------------------------------------------------------------
 # Error against run time
 
-def _cornell(resolution):
-    from pathtracer.scene import compile_scene, load_scene_description
-    desc = load_scene_description(CORNELL)
-    desc.camera.resolution = resolution
-    return compile_scene(desc)
-
-
-def convergence_ours(backend_name, max_spp, res):
+def convergence_ours(backend_name, name, max_spp):
     """(seconds, spp, relMSE) after each progressive pass, compile excluded."""
     from pathtracer.backends import make_backend
     from pathtracer.render import render
-    ref = np.load(CORNELL_REF)
-    scene = _cornell(res)
+    from pathtracer.scene import compile_scene
+    ref, _ = load_reference(name)
+    scene = compile_scene(convergence_desc(name))
     backend = make_backend(backend_name, scene)
     backend.compile()
     points = []
@@ -78,17 +78,18 @@ def convergence_ours(backend_name, max_spp, res):
     return points
 
 
-def convergence_mitsuba(variant, max_spp, res):
-    """Mitsuba is not progressive: one render per spp level, each timed alone."""
+def convergence_mitsuba(variant, max_spp):
+    """Mitsuba is not progressive: one render per spp level, each timed alone (Cornell box,
+    the scene both renderers express identically)."""
     import drjit as dr
     import mitsuba as mi
 
     from bench.common import mitsuba_cornell
     mi.set_variant(variant)
-    ref = np.load(CORNELL_REF)
+    ref, _ = load_reference("cornell-box")
     points = []
     spp = 1
-    scene = mitsuba_cornell(res[0], res[1], 1)
+    scene = mitsuba_cornell(ref.shape[1], ref.shape[0], 1)
     dr.eval(mi.render(scene, spp=1, seed=99))    # warm-up (kernel compilation)
     while spp <= max_spp:
         t0 = time.perf_counter()
@@ -100,65 +101,88 @@ def convergence_mitsuba(variant, max_spp, res):
     return points
 
 
-def section_convergence(res, backends, mitsuba_variant, max_spp, r):
-    curves = {}
-    for b in backends:
-        curves[f"pt-render {b}"] = convergence_ours(b, max_spp, res)
-    if mitsuba_variant:
+def section_convergence(scenes, backends, mitsuba_variant, max_spp, r):
+    """{(scene, renderer): [(seconds, spp, relMSE)]}, plus the reference noise per scene."""
+    curves, noise = {}, {}
+    for name in scenes:
         try:
-            curves[f"Mitsuba {mitsuba_variant}"] = convergence_mitsuba(mitsuba_variant,
-                                                                       max_spp, res)
-        except ImportError:
-            print("bench: Mitsuba not installed: no peer in the convergence plot",
-                  file=sys.stderr)
-    for name, pts in curves.items():
+            _, meta = load_reference(name)
+        except FileNotFoundError:
+            print(f"bench: no reference for {name} (python -m bench.references on a GPU): "
+                  "skipped", file=sys.stderr)
+            continue
+        noise[name] = meta.get("noise_relmse")
+        for b in backends:
+            curves[name, f"pt-render {b}"] = convergence_ours(b, name, max_spp)
+        if mitsuba_variant and name == "cornell-box":
+            try:
+                curves[name, f"Mitsuba {mitsuba_variant}"] = convergence_mitsuba(
+                    mitsuba_variant, max_spp)
+            except ImportError:
+                print("bench: Mitsuba not installed: no peer in the convergence plot",
+                      file=sys.stderr)
+    for (scene, name), pts in curves.items():
         for sec, spp, err in pts:
-            r.add("convergence", "cornell-box", name, "relMSE", err, "", "spp", spp)
-            r.add("convergence", "cornell-box", name, "seconds", sec, "s", "spp", spp)
+            r.add("convergence", scene, name, "relMSE", err, "", "spp", spp)
+            r.add("convergence", scene, name, "seconds", sec, "s", "spp", spp)
         for th in THRESHOLDS:
             t = time_to_threshold([p[0] for p in pts], [p[2] for p in pts], th)
-            r.add("convergence", "cornell-box", name, "time_to_relMSE", "" if t is None else t,
+            r.add("convergence", scene, name, "time_to_relMSE", "" if t is None else t,
                   "s", "threshold", th)
-    _plot_convergence(curves, os.path.join(r.out, "convergence.png"), res)
-    return curves
+    for scene, v in noise.items():
+        if v is not None:
+            r.add("convergence", scene, "reference", "noise_relMSE", v, "")
+    _plot_convergence(curves, os.path.join(r.out, "convergence.png"))
+    return curves, noise
 
 
-def _plot_convergence(curves, path, res):
-    """Log-log relMSE against seconds; skipped (with a message) without matplotlib: the CSV
-    holds the data, and `python -m bench --replot DIR` draws it later."""
+def _plot_convergence(curves, path):
+    """Log-log relMSE against seconds, one panel per scene; skipped (with a message) without
+    matplotlib: the CSV holds the data, and `python -m bench --replot CSV` draws it later."""
     try:
         import matplotlib
     except ImportError:
-        print("bench: matplotlib not installed: no plot (python -m bench --replot DIR)",
+        print("bench: matplotlib not installed: no plot (python -m bench --replot CSV)",
               file=sys.stderr)
         return
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(6, 4))
-    for name, pts in curves.items():
-        ax.loglog([p[0] for p in pts], [p[2] for p in pts], "o-", label=name)
-    for th in THRESHOLDS:
-        ax.axhline(th, color="grey", lw=0.5, ls="--")
-    ax.set_xlabel("seconds (compile excluded)")
-    ax.set_ylabel("relMSE vs Mitsuba reference")
-    ax.set_title(f"Cornell box {res[0]}x{res[1]}")
-    ax.legend()
+    scenes = list(dict.fromkeys(s for s, _ in curves))
+    if not scenes:
+        return
+    cols = min(2, len(scenes))
+    rows = (len(scenes) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(5.5 * cols, 3.8 * rows), squeeze=False)
+    for ax, scene in zip(axes.flat, scenes):
+        for (s, name), pts in curves.items():
+            if s == scene:
+                ax.loglog([p[0] for p in pts], [p[2] for p in pts], "o-", ms=3, label=name)
+        for th in THRESHOLDS:
+            ax.axhline(th, color="grey", lw=0.5, ls="--")
+        ax.set_xlabel("seconds (compile excluded)")
+        ax.set_ylabel("relMSE vs reference")
+        ax.set_title(scene)
+        ax.legend(fontsize=8)
+    for ax in list(axes.flat)[len(scenes):]:
+        ax.set_visible(False)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
 def curves_from_csv(paths):
-    """{renderer: [(seconds, spp, relMSE)]} from the convergence rows of results.csv files."""
+    """{(scene, renderer): [(seconds, spp, relMSE)]} from the convergence rows of results.csv
+    files."""
     data = {}
     for path in paths:
         for row in csv.DictReader(open(path)):
             if row["section"] != "convergence" or row["parameter"] != "spp":
                 continue
-            d = data.setdefault(row["renderer"], {}).setdefault(int(row["value"]), {})
+            d = data.setdefault((row["scene"], row["renderer"]), {}).setdefault(
+                int(row["value"]), {})
             d[row["metric"]] = float(row["result"])
-    return {name: [(v["seconds"], spp, v["relMSE"]) for spp, v in sorted(pts.items())]
-            for name, pts in data.items()}
+    return {key: [(v["seconds"], spp, v["relMSE"]) for spp, v in sorted(pts.items())]
+            for key, pts in data.items()}
 
 
 # ---------------------------------------------------------------------------------------
@@ -208,6 +232,13 @@ def section_filtering(backend_name, res, spp, repeats, r):
     return out
 
 
+def _cornell(resolution):
+    from pathtracer.scene import compile_scene
+    desc = convergence_desc("cornell-box")
+    desc.camera.resolution = resolution
+    return compile_scene(desc)
+
+
 def section_blocks(res, spp, repeats, r):
     from pathtracer.backends.cuda import CUDABackend
     scene = _cornell(res)
@@ -220,34 +251,6 @@ def section_blocks(res, spp, repeats, r):
     return out
 
 
-def _mesh_scene_desc(obj, res):
-    """A mesh (scaled to unit size) in a white furnace-like setting: diffuse 0.8, a constant
-    sky, seen whole; 3 bounces. Traversal dominates its cost."""
-    from pathtracer.scene import load_scene_description
-    from pathtracer.scene.meshes import load_obj
-    import json
-    import tempfile
-    pos = load_obj(obj).positions.reshape(-1, 3)
-    lo, hi = pos.min(0), pos.max(0)
-    size = float((hi - lo).max())
-    centre = ((lo + hi) / 2).tolist()
-    scene = {"camera": {"resolution": list(res), "position": [0.3, 0.4, 2.2],
-                        "lookAt": [0, 0, 0], "fov": 35},
-             "render": {"maxBounces": 3},
-             "materials": [{"name": "m", "type": "diffuse", "albedo": 0.8}],
-             "objects": [{"name": "o", "file": obj, "material": "m", "smooth": False,
-                          "transform": {"matrix": [
-                              [1 / size, 0, 0, -centre[0] / size],
-                              [0, 1 / size, 0, -centre[1] / size],
-                              [0, 0, 1 / size, -centre[2] / size], [0, 0, 0, 1]]}}],
-             "environment": {"color": 1.0}}
-    with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as f:
-        json.dump(scene, f)
-    desc = load_scene_description(f.name)
-    os.unlink(f.name)
-    return desc
-
-
 def section_bvh(backend_name, meshes, res, spp, repeats, variants, r):
     """The thesis's evaluation with clear metrics: build time, SAH cost, nodes and traversal
     speed (camera paths/s) for brute force (one leaf), midpoint splits, and binned SAH over
@@ -257,14 +260,16 @@ def section_bvh(backend_name, meshes, res, spp, repeats, variants, r):
     from pathtracer.scene import compile_scene
     out = []
     for label, obj, brute in meshes:
-        desc = _mesh_scene_desc(obj, res)
+        desc = mesh_desc(obj, res)
         for name, options in variants:
             if options.get("split") == "none" and not brute:
                 continue
             builds = []
-            for _ in range(3):
+            while len(builds) < 3:     # median of 3 builds; one where a build takes > 2 s
                 scene = compile_scene(desc, bvh_options=options)
                 builds.append(scene.timings["bvh_build"])
+                if builds[0] > 2.0:
+                    break
             from pathtracer.accel import build_bvh
             cost = sah_cost(build_bvh(_positions(scene), **options))
             t = _pass_time(make_backend(backend_name, scene), scene, spp, repeats)
@@ -285,72 +290,214 @@ def _positions(scene):
     return np.stack([v0, v0 + tv[:, 3:6], v0 + tv[:, 6:9]], axis=1)
 
 
-def section_compile(backends, r):
+def section_scaling(backend_name, meshes, res, spp, repeats, r):
+    """Paths/s, memory and build times from 1k to 6.4M triangles, one process per mesh."""
+    from bench.scaling import growth_exponent, run
+    out = []
+    for label, obj in meshes:
+        rec = run(obj, backend_name, res, spp, repeats)
+        if "error" in rec:
+            print(f"bench: scaling {label}: {rec['error']}", file=sys.stderr)
+            continue
+        rec["mesh"] = label
+        out.append(rec)
+        n = rec["triangles"]
+        for k in ("triangles", "load_s", "bvh_build_s", "bvh_nodes", "paths_per_s",
+                  "ns_per_path", "host_bytes", "peak_rss_bytes", "device_bytes"):
+            if k in rec:
+                r.add("scaling", label, f"pt-render {backend_name}", k, rec[k], "")
+        for k in ("host_bytes", "host_geometry_bytes", "device_bytes"):
+            if k in rec:
+                r.add("scaling", label, f"pt-render {backend_name}", k + "_per_triangle",
+                      rec[k] / n, "B")
+    _plot_scaling(out, os.path.join(r.out, "scaling.png"), backend_name)
+    # one shape at growing triangle counts: the dragon and its subdivisions (other meshes
+    # differ in how much of the image they cover, which changes the time per path too)
+    fam = [x for x in out if x["mesh"].startswith("dragon")]
+    if len(fam) >= 2:
+        slope = growth_exponent([x["triangles"] for x in fam], [x["ns_per_path"] for x in fam])
+        r.add("scaling", "dragon family", f"pt-render {backend_name}",
+              "time_per_path_exponent", slope, "")
+    return out
+
+
+def _plot_scaling(recs, path, backend_name):
+    try:
+        import matplotlib
+    except ImportError:
+        return
+    if not recs:
+        return
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    n = [x["triangles"] for x in recs]
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.8))
+    a.loglog(n, [x["ns_per_path"] for x in recs], "o-")
+    a.set_xlabel("triangles")
+    a.set_ylabel("ns per camera path")
+    a.set_title(f"time per path ({backend_name})")
+    b.semilogx(n, [x["host_bytes"] / x["triangles"] for x in recs], "o-", label="host, all")
+    b.semilogx(n, [x["host_geometry_bytes"] / x["triangles"] for x in recs], "s--",
+               label="host, triangles + BVH")
+    if all("device_bytes" in x for x in recs):
+        b.semilogx(n, [x["device_bytes"] / x["triangles"] for x in recs], "^-",
+                   label="device (measured)")
+    b.set_ylim(0, 2 * max(x["host_geometry_bytes"] / x["triangles"] for x in recs))
+    b.set_xlabel("triangles")
+    b.set_ylabel("bytes per triangle")
+    b.set_title("memory")
+    b.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def compile_scenes(out_dir):
+    """(label, scene file) per kernel feature set: the sun scene is written out as a file."""
+    from bench.scenes import SCENES_DIR, sun
+    sun_file = os.path.join(out_dir, "sun-scene.json")
+    with open(sun_file, "w") as f:
+        json.dump(sun((64, 64)), f)
+    return [("cornell-box", os.path.join(SCENES_DIR, "cornell-box.json")),
+            ("sun", sun_file),
+            ("textured", os.path.join(SCENES_DIR, "textured.json")),
+            ("glass", os.path.join(SCENES_DIR, "glass.json")),
+            ("depth-of-field", os.path.join(SCENES_DIR, "depth-of-field.json"))]
+
+
+def section_compile(backends, scenes, r):
+    """Cold and warm kernel compile per scene feature set, fresh processes."""
     from bench.throughput import compile_times
     out = {}
     for b in backends:
-        rec = compile_times(b)
-        out[b] = rec
-        for label, v in rec.items():
-            if "error" in v:
-                continue
-            r.add("compile", "cornell-box", f"pt-render {b}", "compile_s", v["compile_s"], "s",
-                  "cache", label)
-            r.add("compile", "cornell-box", f"pt-render {b}", "to_first_pixel_s",
-                  v["to_first_pixel_s"], "s", "cache", label)
+        for label, path in scenes:
+            rec = compile_times(b, path)
+            out[b, label] = rec
+            for cache, v in rec.items():
+                if "error" in v:
+                    print(f"bench: compile {label} ({b}, {cache}): {v['error']}",
+                          file=sys.stderr)
+                    continue
+                for k in ("compile_s", "to_first_pixel_s"):
+                    r.add("compile", label, f"pt-render {b}", k, v[k], "s", "cache", cache)
     return out
 
 
 # ---------------------------------------------------------------------------------------
 
-def summary(r, curves, thr, filt, blocks, bvh, comp, args):
+def _fmt_time(t):
+    return "not reached" if t is None else f"{t:.3g} s"
+
+
+def summary(r, res, args):
+    curves, noise = res["convergence"]
     lines = [f"# Benchmark run ({r.context['date']})", "",
              f"- command: `{r.context['command']}`", f"- machine: {r.context['machine']}",
-             f"- versions: {versions()}", "",
-             "## Error against run time (Cornell box, relMSE vs the Mitsuba reference)", "",
-             "| renderer | spp | seconds | relMSE |", "|---|---|---|---|"]
-    for name, pts in curves.items():
-        for sec, spp, err in pts:
-            lines.append(f"| {name} | {spp} | {sec:.3g} | {err:.3g} |")
-    lines += ["", "| renderer | time to relMSE 1e-2 | time to relMSE 1e-3 |", "|---|---|---|"]
-    for name, pts in curves.items():
-        tt = [time_to_threshold([p[0] for p in pts], [p[2] for p in pts], th)
-              for th in THRESHOLDS]
-        lines.append(f"| {name} | " + " | ".join("not reached" if t is None else f"{t:.3g} s"
-                                                for t in tt) + " |")
+             f"- versions: {versions()}", ""]
     if curves:
+        lines += ["## Error against run time", "",
+                  "relMSE against each scene's reference (the Cornell box: Mitsuba 3's; the "
+                  "others: ours at high spp, `bench/references/`), compile excluded.", "",
+                  "| scene | renderer | time to relMSE 1e-2 | time to relMSE 1e-3 | "
+                  "last spp | last seconds | last relMSE | reference noise |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for (scene, name), pts in curves.items():
+            tt = [time_to_threshold([p[0] for p in pts], [p[2] for p in pts], th)
+                  for th in THRESHOLDS]
+            sec, spp, err = pts[-1]
+            nz = noise.get(scene)
+            lines.append(f"| {scene} | {name} | {_fmt_time(tt[0])} | {_fmt_time(tt[1])} | "
+                         f"{spp} | {sec:.3g} | {err:.3g} | "
+                         f"{'' if nz is None else f'{nz:.2g}'} |")
         lines += ["", "![convergence](convergence.png)"]
-    lines += ["", "## Throughput (Cornell box)", "", "| renderer | M camera paths/s | M rays/s |",
-              "|---|---|---|"]
-    for name, rec in thr.items():
-        paths = rec["paths_per_s"]
-        rays = paths * (1 + rec["bounce_rays_per_path"] + rec["shadow_rays_per_path"])
-        lines.append(f"| {name} | {paths / 1e6:.3g} | {rays / 1e6:.3g} |")
-    if filt:
+    thr = res["throughput"]
+    if thr:
+        lines += ["", "## Throughput (Cornell box)", "",
+                  "| renderer | M camera paths/s | M rays/s | bounce rays/path | "
+                  "shadow rays/path |", "|---|---|---|---|---|"]
+        for name, rec in thr.items():
+            paths = rec["paths_per_s"]
+            rays = paths * (1 + rec["bounce_rays_per_path"] + rec["shadow_rays_per_path"])
+            lines.append(f"| {name} | {paths / 1e6:.3g} | {rays / 1e6:.3g} | "
+                         f"{rec['bounce_rays_per_path']:.3f} | "
+                         f"{rec['shadow_rays_per_path']:.3f} |")
+    if res["filtering"]:
         lines += ["", "## Texture filtering (textured.json)", "",
                   "| filter | M camera paths/s |", "|---|---|"]
-        lines += [f"| {k} | {v / 1e6:.3g} |" for k, v in filt.items()]
-    if blocks:
+        lines += [f"| {k} | {v / 1e6:.3g} |" for k, v in res["filtering"].items()]
+    if res["blocks"]:
         lines += ["", "## CUDA block sizes (Cornell box)", "", "| block | M camera paths/s |",
                   "|---|---|"]
-        lines += [f"| {b[0]}x{b[1]} | {v / 1e6:.4g} |" for b, v in blocks.items()]
-    if bvh:
+        lines += [f"| {b[0]}x{b[1]} | {v / 1e6:.4g} |" for b, v in res["blocks"].items()]
+    if res["bvh"]:
         lines += ["", "## BVH (thesis evaluation, clear metrics)", "",
                   "| mesh | triangles | variant | build s | SAH cost | nodes | M camera paths/s |",
                   "|---|---|---|---|---|---|---|"]
-        for b in bvh:
+        for b in res["bvh"]:
             lines.append(f"| {b['mesh']} | {b['triangles']} | {b['variant']} | "
                          f"{b['build_s']:.3g} | {b['sah_cost']:.3g} | {b['nodes']} | "
                          f"{b['paths_per_s'] / 1e6:.3g} |")
-    lines += ["", "## Compile times (Cornell box, fresh processes)", "",
-              "| backend | cache | compile s | to first pixel s |", "|---|---|---|---|"]
-    for b, rec in comp.items():
-        for label, v in rec.items():
-            if "error" not in v:
-                lines.append(f"| {b} | {label} | {v['compile_s']:.3g} | "
-                             f"{v['to_first_pixel_s']:.3g} |")
+    if res["scaling"]:
+        lines += ["", "## Scaling with the triangle count", "",
+                  "| mesh | triangles | load s (cached?) | BVH build s | M camera paths/s | "
+                  "ns per path | host B/triangle (geometry) | device B/triangle | peak RSS MB |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        for x in res["scaling"]:
+            n = x["triangles"]
+            dev = f"{x['device_bytes'] / n:.0f}" if "device_bytes" in x else "n/a"
+            lines.append(f"| {x['mesh']} | {n} | {x['load_s']:.3g} "
+                         f"({'yes' if x['load_from_cache'] else 'no'}) | "
+                         f"{x['bvh_build_s']:.3g} | {x['paths_per_s'] / 1e6:.3g} | "
+                         f"{x['ns_per_path']:.3g} | {x['host_bytes'] / n:.0f} "
+                         f"({x['host_geometry_bytes'] / n:.0f}) | {dev} | "
+                         f"{x['peak_rss_bytes'] / 1e6:.0f} |")
+        for row in r.rows:
+            if row["metric"] == "time_per_path_exponent":
+                lines += ["", f"Time per path grows as N^{row['result']:.3f} over the dragon "
+                              "and its subdivisions (least squares in log-log)."]
+    if res["compile"]:
+        lines += ["", "## Compile times per scene feature set (fresh processes)", "",
+                  "| backend | scene | features | cold compile s | warm compile s | "
+                  "warm: to first pixel s |", "|---|---|---|---|---|---|"]
+        for (b, label), rec in res["compile"].items():
+            cold, warm = rec.get("cold", {}), rec.get("warm", {})
+            if "error" in cold or "error" in warm:
+                continue
+            lines.append(f"| {b} | {label} | {', '.join(cold['features']) or 'lean'} | "
+                         f"{cold['compile_s']:.3g} | {warm['compile_s']:.3g} | "
+                         f"{warm['to_first_pixel_s']:.3g} |")
     with open(os.path.join(r.out, "summary.md"), "w") as f:
         f.write("\n".join(lines) + "\n")
+
+
+def _bvh_meshes(args):
+    from bench.common import SHARED
+    from bench.scaling import big_mesh
+    models = os.path.join(SHARED, "assets", "models")
+    meshes = [("suzanne", os.path.join(models, "suzanne.obj"), True),
+              ("bunny-lowres", os.path.join(models, "stanford_bunny_lowres.obj"), True)]
+    if not args.tiny:
+        # brute force over 100k triangles: on the GPU only (0.5 M paths/s)
+        meshes += [("dragon-100k", os.path.join(models, "stanford_dragon_100k.obj"),
+                    args.gpu)]
+    if not args.quick:
+        meshes += [("dragon-1600k", big_mesh(2), False)]
+    return meshes
+
+
+def _scaling_meshes(args):
+    from bench.common import SHARED
+    from bench.scaling import big_mesh
+    models = os.path.join(SHARED, "assets", "models")
+    meshes = [("suzanne", os.path.join(models, "suzanne.obj")),
+              ("bunny-lowres", os.path.join(models, "stanford_bunny_lowres.obj"))]
+    if not args.tiny:
+        meshes += [("bunny", os.path.join(models, "stanford_bunny.obj")),
+                   ("dragon-100k", os.path.join(models, "stanford_dragon_100k.obj"))]
+    if not args.quick:
+        meshes += [(f"dragon-{100 * 4 ** k}k", big_mesh(k))
+                   for k in range(1, args.max_subdivision + 1)]
+    return meshes
 
 
 def main(argv=None):
@@ -362,57 +509,62 @@ def main(argv=None):
     p.add_argument("--out", help="output folder (default bench/out/<date>)")
     p.add_argument("--sections", nargs="*", default=SECTIONS, choices=SECTIONS,
                    help="run only these")
+    p.add_argument("--scenes", nargs="*", default=list(CONVERGENCE), choices=list(CONVERGENCE),
+                   help="error-against-time scenes")
+    p.add_argument("--max-subdivision", type=int, default=3, choices=(0, 1, 2, 3),
+                   help="scaling: largest subdivided dragon (3: 6.4M triangles)")
     p.add_argument("--replot", nargs="+", metavar="CSV",
                    help="only draw convergence.png (in --out) from these results.csv files")
     args = p.parse_args(argv)
+    if args.tiny and not args.quick:
+        p.error("--tiny goes with --quick")
     if args.replot:
         out = args.out or os.path.dirname(os.path.abspath(args.replot[0]))
-        _plot_convergence(curves_from_csv(args.replot), os.path.join(out, "convergence.png"),
-                          (256, 256))
+        _plot_convergence(curves_from_csv(args.replot), os.path.join(out, "convergence.png"))
         return 0
     stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%d-%H%M%S")
     out = args.out or os.path.join(ROOT, "bench", "out", stamp)
     os.makedirs(out, exist_ok=True)
     r = Results(out)
-    backends = ["cuda"] if args.gpu else ["cpu"]
+    b = "cuda" if args.gpu else "cpu"
     peer = None if args.no_mitsuba else ("cuda_ad_rgb" if args.gpu else "llvm_ad_rgb")
-    if args.quick and args.tiny:
-        max_spp, tp, repeats, filt_res = 4, ((64, 64), 2), 2, (32, 24)
+    if args.tiny:
+        max_spp, tp, repeats, filt_res, mres = 2, ((64, 64), 2), 2, (32, 24), ((32, 32), 1)
     elif args.quick:
-        max_spp, tp, repeats, filt_res = 64, ((128, 128), 8), 3, (160, 120)
+        max_spp, tp, repeats, filt_res, mres = 64, ((128, 128), 8), 3, (160, 120), ((64, 64), 4)
     elif args.gpu:
-        max_spp, tp, repeats, filt_res = 4096, ((1024, 1024), 64), 7, (1280, 960)
+        max_spp, tp, repeats, filt_res, mres = (16384, ((1024, 1024), 64), 7, (1280, 960),
+                                                ((256, 256), 4))
     else:
-        max_spp, tp, repeats, filt_res = 1024, ((256, 256), 16), 7, (320, 240)
+        max_spp, tp, repeats, filt_res, mres = 1024, ((256, 256), 16), 7, (320, 240), ((96, 96), 4)
     t0 = time.perf_counter()
     want = set(args.sections)
-    curves = (section_convergence((256, 256), backends, peer, max_spp, r)
-              if "convergence" in want else {})
-    thr = section_throughput(backends, tp[0], tp[1], repeats, r) if "throughput" in want else {}
-    filt = (section_filtering(backends[0], filt_res, 2 if args.tiny else 8, repeats, r)
-            if "filtering" in want else {})
-    blocks = (section_blocks((1024, 1024), 16, repeats, r)
-              if args.gpu and "blocks" in want else {})
-    bvh = []
+    res = {"convergence": ({}, {}), "throughput": {}, "filtering": {}, "blocks": {}, "bvh": [],
+           "scaling": [], "compile": {}}
+    if "convergence" in want:
+        res["convergence"] = section_convergence(args.scenes, [b], peer, max_spp, r)
+    if "throughput" in want:
+        res["throughput"] = section_throughput([b], tp[0], tp[1], repeats, r)
+    if "filtering" in want:
+        res["filtering"] = section_filtering(b, filt_res, 2 if args.tiny else 8, repeats, r)
+    if args.gpu and "blocks" in want:
+        res["blocks"] = section_blocks((1024, 1024), 16, repeats, r)
     if "bvh" in want:
-        from bench.common import SHARED
-        models = os.path.join(SHARED, "assets", "models")
-        meshes = [("suzanne", os.path.join(models, "suzanne.obj"), True),
-                  ("bunny-lowres", os.path.join(models, "stanford_bunny_lowres.obj"), True)]
-        if not args.tiny:
-            meshes += [("dragon-100k", os.path.join(models, "stanford_dragon_100k.obj"),
-                        args.gpu)]
         variants = [("brute force", dict(split="none")), ("midpoint", dict(split="midpoint")),
                     ("SAH 16 bins, leaf 8", dict())]
         if not args.tiny:
-            variants += [(f"SAH {b} bins, leaf 8", dict(n_bins=b)) for b in (4, 8, 12, 32)]
+            variants += [(f"SAH {n} bins, leaf 8", dict(n_bins=n)) for n in (4, 8, 12, 32)]
             variants += [(f"SAH 16 bins, leaf {k}", dict(max_leaf=k)) for k in (1, 2, 4, 16)]
-        bres = (32, 32) if args.tiny else ((256, 256) if args.gpu else (96, 96))
-        bvh = section_bvh(backends[0], meshes, bres, 1 if args.tiny else 4, repeats,
-                          variants, r)
-    comp = section_compile(backends, r) if "compile" in want else {}
+        res["bvh"] = section_bvh(b, _bvh_meshes(args), mres[0], mres[1], repeats, variants, r)
+    if "scaling" in want:
+        res["scaling"] = section_scaling(b, _scaling_meshes(args), mres[0], mres[1],
+                                         3 if args.quick else 5, r)
+    if "compile" in want:
+        scenes = compile_scenes(out)
+        res["compile"] = section_compile([b], scenes[:1] if args.tiny else
+                                         scenes[::2] if args.quick else scenes, r)
     r.write()
-    summary(r, curves, thr, filt, blocks, bvh, comp, args)
+    summary(r, res, args)
     print(f"bench: {len(r.rows)} rows in {time.perf_counter() - t0:.0f} s -> {out}",
           file=sys.stderr)
     return 0

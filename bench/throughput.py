@@ -101,18 +101,20 @@ backend.compile()
 t2 = time.perf_counter()
 backend.render_pass(0, 1, 0, scene.max_bounces, scene.rr_depth)
 t3 = time.perf_counter()
+features = [k for k, v in scene.features._asdict().items() if v]
 print(json.dumps({"import_and_load_s": t1 - t0, "compile_s": t2 - t1,
-                  "first_pass_s": t3 - t2, "to_first_pixel_s": t3 - t0}))
+                  "first_pass_s": t3 - t2, "to_first_pixel_s": t3 - t0,
+                  "features": features}))
 """
 
 
-def compile_times(backend_name):
+def compile_times(backend_name, scene_path=CORNELL):
     """Cold (empty cache) and warm (cache filled by the cold run) compile, fresh processes."""
     out = {}
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache)
         for label in ("cold", "warm"):
-            r = subprocess.run([sys.executable, "-c", COMPILE_PROBE, CORNELL, backend_name],
+            r = subprocess.run([sys.executable, "-c", COMPILE_PROBE, scene_path, backend_name],
                                capture_output=True, text=True, env=env)
             if r.returncode != 0:
                 out[label] = {"error": r.stderr.strip().splitlines()[-1:]}

@@ -61,10 +61,13 @@ def test_quick_mode_writes_csv_plot_and_summary(tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     rows = list(csv.DictReader(open(tmp_path / "results.csv")))
     sections = {row["section"] for row in rows}
-    assert {"convergence", "throughput", "filtering", "bvh", "compile"} <= sections
+    assert {"convergence", "throughput", "filtering", "bvh", "scaling", "compile"} <= sections
     for row in rows:
         assert row["command"] and row["machine"] and row["date"]
-    assert (tmp_path / "convergence.png").stat().st_size > 1000
+    from bench.scenes import CONVERGENCE
+    assert {row["scene"] for row in rows if row["section"] == "convergence"} == set(CONVERGENCE)
+    for png in ("convergence.png", "scaling.png"):
+        assert (tmp_path / png).stat().st_size > 1000
     summary = (tmp_path / "summary.md").read_text()
     assert "relMSE" in summary and "paths/s" in summary
 
@@ -77,4 +80,38 @@ def test_replot_reads_the_csv(tmp_path):
         r.add("convergence", "cornell-box", "x", "seconds", sec, "s", "spp", spp)
     r.write()
     assert curves_from_csv([str(tmp_path / "results.csv")]) == {
-        "x": [(0.1, 1, 0.3), (0.2, 2, 0.15)]}
+        ("cornell-box", "x"): [(0.1, 1, 0.3), (0.2, 2, 0.15)]}
+
+
+def test_reference_noise_estimate_matches_the_true_error():
+    """Two noisy halves of a known image: the estimate (from the halves alone) equals the
+    relMSE of their mean against the truth, to sampling precision."""
+    from bench.references import reference_noise
+    rng = np.random.default_rng(1)
+    truth = rng.uniform(0.0, 3.0, (200, 200, 3))
+    sigma = 0.02 * (1 + truth)
+    a = truth + sigma * rng.standard_normal(truth.shape)
+    b = truth + sigma * rng.standard_normal(truth.shape)
+    assert reference_noise(a, b) == pytest.approx(relmse((a + b) / 2, truth), rel=0.02)
+    assert reference_noise(truth, truth) == 0
+
+
+def test_growth_exponent_of_a_power_law():
+    from bench.scaling import growth_exponent
+    n = [1e3, 1e4, 1e5, 1e6]
+    assert growth_exponent(n, [2.0 * x ** 0.25 for x in n]) == pytest.approx(0.25)
+    assert growth_exponent(n, [7.0] * 4) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_committed_references_are_converged_and_match_their_scenes():
+    """The error-against-time references (bench/references/, made on a GPU): high spp, noise
+    far under the thresholds the benchmark reports, the resolution the benchmark renders."""
+    from bench.scenes import CONVERGENCE, load_reference
+    for name, (_, res) in CONVERGENCE.items():
+        if name == "cornell-box":
+            continue
+        image, meta = load_reference(name)
+        assert image.shape == (res[1], res[0], 3) and np.isfinite(image).all()
+        assert meta["spp"] >= 16384 and meta["noise_relmse"] < 1e-4, meta
+        for key in ("command", "machine", "date"):
+            assert meta[key]

@@ -1,0 +1,77 @@
+"""High-spp references for the error-against-time study (every scene but the Cornell box,
+whose reference is Mitsuba 3's). Made on a GPU and committed in bench/references/, because a
+CPU cannot make them in reasonable time:
+
+    python -m bench.references --spp 65536 [--scenes bunny-studio sun] [--backend cuda]
+
+Each reference is the mean of two independent halves (seeds far from those the benchmark
+uses); the halves' difference estimates the reference's own noise, stored with it, so a
+relMSE measured against it can be read with its floor in mind.
+"""
+import argparse
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+if ROOT not in sys.path:
+    sys.path.insert(0, ROOT)
+
+from bench.common import command, machine, now, versions  # noqa: E402
+from bench.scenes import CONVERGENCE, REFERENCES, convergence_desc, reference_path  # noqa: E402
+
+SEEDS = (1_000_003, 2_000_029)
+
+
+def reference_noise(half_a, half_b, eps=0.01):
+    """Expected relMSE of (a + b) / 2 against the noise-free image, from two independent
+    unbiased halves: E[(a - b)^2] = 2 var(half) and var(mean) = var(half) / 2, so the mean's
+    variance is E[(a - b)^2] / 4 (per pixel, with relMSE's denominator)."""
+    a = np.asarray(half_a, np.float64)
+    b = np.asarray(half_b, np.float64)
+    m = (a + b) / 2
+    return float(np.mean((a - b) ** 2 / 4 / (m * m + eps)))
+
+
+def make_reference(name, spp, backend_name):
+    from pathtracer.backends import make_backend
+    from pathtracer.render import render
+    from pathtracer.scene import compile_scene
+    scene = compile_scene(convergence_desc(name))
+    backend = make_backend(backend_name, scene)
+    halves, seconds = [], 0.0
+    for seed in SEEDS:
+        t0 = time.perf_counter()
+        res = render(scene, backend, spp=spp // 2, seed=seed, pass_seconds=2.0)
+        seconds += time.perf_counter() - t0
+        halves.append(res.film.image().astype(np.float64))
+    image = ((halves[0] + halves[1]) / 2).astype(np.float32)
+    meta = {"scene": name, "spp": spp, "seeds": list(SEEDS), "backend": backend_name,
+            "resolution": [scene.width, scene.height], "seconds": seconds,
+            "noise_relmse": reference_noise(*halves), "command": command(),
+            "machine": machine(), "date": now(), "versions": versions()}
+    return image, meta
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--spp", type=int, default=65536)
+    p.add_argument("--backend", default="cuda")
+    p.add_argument("--scenes", nargs="*", default=[n for n in CONVERGENCE if n != "cornell-box"])
+    p.add_argument("--out", default=REFERENCES)
+    a = p.parse_args(argv)
+    os.makedirs(a.out, exist_ok=True)
+    for name in a.scenes:
+        image, meta = make_reference(name, a.spp, a.backend)
+        path = os.path.join(a.out, os.path.basename(reference_path(name)))
+        np.savez_compressed(path, image=image, meta=json.dumps(meta))
+        print(f"{name}: {meta['spp']} spp in {meta['seconds']:.1f} s, reference noise "
+              f"(relMSE) {meta['noise_relmse']:.3g} -> {path}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

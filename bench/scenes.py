@@ -1,0 +1,130 @@
+"""The benchmark's scenes: the four of the error-against-time study and the mesh scenes of
+the BVH and scaling studies. Scenes that need data from ../shared are built here as scene
+dictionaries (the scene format), so that ``PT_RENDER_SHARED`` can point at a copy."""
+import json
+import os
+import tempfile
+
+import numpy as np
+
+from bench.common import CORNELL, CORNELL_REF, ROOT, SHARED
+
+SCENES_DIR = os.path.join(ROOT, "scenes")
+MODELS = os.path.join(SHARED, "assets", "models")
+HDRI = os.path.join(SHARED, "assets", "hdri")
+REFERENCES = os.path.join(ROOT, "bench", "references")
+
+
+def describe(scene):
+    """A SceneDescription from a scene dictionary (paths in it absolute)."""
+    from pathtracer.scene import load_scene_description
+    with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as f:
+        json.dump(scene, f)
+    try:
+        return load_scene_description(f.name)
+    finally:
+        os.unlink(f.name)
+
+
+def fit_matrix(obj, size=1.0, floor=None):
+    """A transform matrix scaling the OBJ's largest extent to ``size`` and centring it, or, with
+    ``floor``, standing it on the plane y = floor."""
+    from pathtracer.scene.meshes import load_obj
+    pos = load_obj(obj).positions.reshape(-1, 3).astype(np.float64)
+    lo, hi = pos.min(0), pos.max(0)
+    s = size / float((hi - lo).max())
+    t = -s * (lo + hi) / 2
+    if floor is not None:
+        t[1] = floor - s * lo[1]
+    return [[s, 0, 0, t[0]], [0, s, 0, t[1]], [0, 0, s, t[2]], [0, 0, 0, 1]]
+
+
+def _ground(material):
+    return {"name": "ground", "file": os.path.join(SCENES_DIR, "assets", "plane.obj"),
+            "material": material, "transform": {"scale": [8, 1, 8]}}
+
+
+def bunny_studio(res):
+    """The full Stanford bunny (69k triangles, smooth) in a glossy principled material on a
+    diffuse floor, lit only by the studio HDRI (small bright softboxes)."""
+    bunny = os.path.join(MODELS, "stanford_bunny.obj")
+    return {
+        "camera": {"resolution": list(res), "position": [0.4, 1.0, 3.2],
+                   "lookAt": [0, 0.4, 0], "fov": 30},
+        "render": {"maxBounces": 8},
+        "materials": [{"name": "floor", "type": "diffuse", "albedo": 0.6},
+                      {"name": "bunny", "albedo": [0.75, 0.45, 0.25], "roughness": 0.35,
+                       "clearcoat": 0.5}],
+        "objects": [_ground("floor"),
+                    {"name": "bunny", "file": bunny, "material": "bunny", "smooth": True,
+                     "transform": {"matrix": fit_matrix(bunny, 1.0, floor=0.0)}}],
+        "environment": {"file": os.path.join(HDRI, "studio_small_03_1k.hdr"), "rotation": 60,
+                        "intensity": 0.5},
+    }
+
+
+def sun(res):
+    """Suzanne (rough gold) and a diffuse sphere on a floor under rooitou park, whose
+    unclipped sun (about 65% of the map's power in 0.02% of its texels) casts hard shadows:
+    the hard case for environment sampling."""
+    suzanne = os.path.join(SCENES_DIR, "assets", "suzanne_uv.obj")
+    sphere = os.path.join(SCENES_DIR, "assets", "sphere.obj")
+    return {
+        "camera": {"resolution": list(res), "position": [0.0, 1.3, 2.6],
+                   "lookAt": [0, 0.35, 0], "fov": 36},
+        "render": {"maxBounces": 8},
+        "materials": [{"name": "floor", "type": "diffuse", "albedo": 0.5},
+                      {"name": "gold", "albedo": [1.0, 0.78, 0.34], "metallic": 1.0,
+                       "roughness": 0.3},
+                      {"name": "white", "type": "diffuse", "albedo": 0.8}],
+        "objects": [_ground("floor"),
+                    {"name": "suzanne", "file": suzanne, "material": "gold", "smooth": True,
+                     "transform": {"matrix": fit_matrix(suzanne, 0.9, floor=0.0)}},
+                    {"name": "ball", "file": sphere, "material": "white", "smooth": True,
+                     "transform": {"scale": 0.3, "translate": [0.8, 0.3, -0.3]}}],
+        "environment": {"file": os.path.join(HDRI, "rooitou_park_1k.hdr"), "rotation": 100},
+    }
+
+
+# name: (description builder or scene file, resolution); the reference of every scene but the
+# Cornell box (whose reference is Mitsuba's) is ours at high spp: `python -m bench.references`
+CONVERGENCE = {
+    "cornell-box": (CORNELL, (256, 256)),
+    "bunny-studio": (bunny_studio, (256, 192)),
+    "textured": (os.path.join(SCENES_DIR, "textured.json"), (256, 192)),
+    "sun": (sun, (256, 192)),
+}
+
+
+def convergence_desc(name):
+    from pathtracer.scene import load_scene_description
+    source, res = CONVERGENCE[name]
+    desc = describe(source(res)) if callable(source) else load_scene_description(source)
+    desc.camera.resolution = res
+    return desc
+
+
+def reference_path(name):
+    return os.path.join(REFERENCES, f"{name}.npz")
+
+
+def load_reference(name):
+    """(image, metadata) of a scene's reference; FileNotFoundError when it was not made."""
+    if name == "cornell-box":
+        return np.load(CORNELL_REF), {"source": "Mitsuba 3 (shared/reference/cornell-box)"}
+    with np.load(reference_path(name), allow_pickle=False) as z:
+        return z["image"], json.loads(str(z["meta"]))
+
+
+def mesh_desc(obj, res, bounces=3):
+    """A mesh (scaled to unit size) in a white-furnace-like setting: diffuse 0.8, a constant
+    sky, seen whole; 3 bounces. Traversal dominates its cost."""
+    obj = os.path.abspath(obj)
+    return describe({
+        "camera": {"resolution": list(res), "position": [0.3, 0.4, 2.2], "lookAt": [0, 0, 0],
+                   "fov": 35},
+        "render": {"maxBounces": bounces},
+        "materials": [{"name": "m", "type": "diffuse", "albedo": 0.8}],
+        "objects": [{"name": "o", "file": obj, "material": "m", "smooth": False,
+                     "transform": {"matrix": fit_matrix(obj)}}],
+        "environment": {"color": 1.0}})
