@@ -20,7 +20,7 @@ def read_image(path, where=None, scene_file=None):
             import imagecodecs
             with open(path, "rb") as f:
                 data = f.read()
-            img = np.asarray(imagecodecs.imread(data), np.float64)
+            img = np.asarray(imagecodecs.rgbe_decode(data), np.float64)
             is_float = True
         else:
             import imageio.v3 as iio
