@@ -3,6 +3,11 @@ whose reference is Mitsuba 3's). Made on a GPU and committed in bench/references
 CPU cannot make them in reasonable time:
 
     python -m bench.references --spp 65536 [--scenes bunny-studio sun] [--backend cuda]
+    python -m bench.references --mitsuba cuda_ad_rgb --spp 65536    # Mitsuba 3's own
+
+Mitsuba's curves on these scenes are measured against Mitsuba's own reference
+(`<scene>-mitsuba.npz`), so that both renderers' errors are their noise alone; how far the two
+references differ is stored as `agreement_relmse`.
 
 Each reference is the mean of two independent halves (seeds far from those the benchmark
 uses); the halves' difference estimates the reference's own noise, stored with it, so a
@@ -21,7 +26,9 @@ if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
 from bench.common import command, machine, now, versions  # noqa: E402
-from bench.scenes import CONVERGENCE, REFERENCES, convergence_desc, reference_path  # noqa: E402
+from bench.metrics import relmse  # noqa: E402
+from bench.scenes import (CONVERGENCE, REFERENCES, convergence_desc, load_reference,  # noqa: E402
+                          reference_path)
 
 SEEDS = (1_000_003, 2_000_029)
 
@@ -56,20 +63,56 @@ def make_reference(name, spp, backend_name):
     return image, meta
 
 
+def make_mitsuba_reference(name, spp, variant, chunk=1024):
+    import mitsuba as mi
+
+    from bench.mitsuba_scenes import mitsuba_dict
+    mi.set_variant(variant)
+    scene = mi.load_dict(mitsuba_dict(convergence_desc(name)))
+    halves, t0 = [], time.perf_counter()
+    n = max(1, spp // 2 // chunk)
+    for seed in SEEDS:
+        acc = 0.0
+        for k in range(n):
+            acc = acc + np.array(mi.render(scene, spp=spp // 2 // n, seed=seed + k), np.float64)
+        halves.append(acc / n)
+    image = ((halves[0] + halves[1]) / 2).astype(np.float32)
+    meta = {"scene": name, "spp": 2 * n * (spp // 2 // n), "seeds": list(SEEDS),
+            "renderer": f"Mitsuba {mi.__version__} {variant}",
+            "resolution": [image.shape[1], image.shape[0]],
+            "seconds": time.perf_counter() - t0, "noise_relmse": reference_noise(*halves),
+            "command": command(), "machine": machine(), "date": now(), "versions": versions()}
+    try:
+        meta["agreement_relmse"] = relmse(image, load_reference(name)[0])
+    except FileNotFoundError:
+        pass
+    return image, meta
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--spp", type=int, default=65536)
     p.add_argument("--backend", default="cuda")
     p.add_argument("--scenes", nargs="*", default=[n for n in CONVERGENCE if n != "cornell-box"])
+    p.add_argument("--mitsuba", metavar="VARIANT", help="Mitsuba 3's reference instead")
     p.add_argument("--out", default=REFERENCES)
     a = p.parse_args(argv)
     os.makedirs(a.out, exist_ok=True)
     for name in a.scenes:
-        image, meta = make_reference(name, a.spp, a.backend)
-        path = os.path.join(a.out, os.path.basename(reference_path(name)))
+        if a.mitsuba:
+            from bench.mitsuba_scenes import NotExpressible
+            try:
+                image, meta = make_mitsuba_reference(name, a.spp, a.mitsuba)
+            except NotExpressible as e:
+                print(f"{name}: not expressible in Mitsuba ({e}): skipped", flush=True)
+                continue
+        else:
+            image, meta = make_reference(name, a.spp, a.backend)
+        path = os.path.join(a.out, os.path.basename(reference_path(name, bool(a.mitsuba))))
         np.savez_compressed(path, image=image, meta=json.dumps(meta))
         print(f"{name}: {meta['spp']} spp in {meta['seconds']:.1f} s, reference noise "
-              f"(relMSE) {meta['noise_relmse']:.3g} -> {path}", flush=True)
+              f"(relMSE) {meta['noise_relmse']:.3g}, against ours "
+              f"{meta.get('agreement_relmse', float('nan')):.3g} -> {path}", flush=True)
     return 0
 
 

@@ -78,18 +78,25 @@ def convergence_ours(backend_name, name, max_spp):
     return points
 
 
-def convergence_mitsuba(variant, max_spp):
-    """Mitsuba is not progressive: one render per spp level, each timed alone (Cornell box,
-    the scene both renderers express identically)."""
+def convergence_mitsuba(variant, name, max_spp):
+    """Mitsuba is not progressive: one render per spp level, each timed alone, against
+    Mitsuba's reference (the Cornell box: the reference's own scene, `mitsuba_cornell`).
+    None when the scene cannot be expressed in Mitsuba or has no Mitsuba reference."""
     import drjit as dr
     import mitsuba as mi
 
     from bench.common import mitsuba_cornell
+    from bench.mitsuba_scenes import NotExpressible, mitsuba_dict
     mi.set_variant(variant)
-    ref, _ = load_reference("cornell-box")
+    try:
+        ref, _ = load_reference(name, mitsuba=True)
+        scene = (mitsuba_cornell(ref.shape[1], ref.shape[0], 1) if name == "cornell-box" else
+                 mi.load_dict(mitsuba_dict(convergence_desc(name))))
+    except (FileNotFoundError, NotExpressible) as e:
+        print(f"bench: no Mitsuba curve for {name}: {e}", file=sys.stderr)
+        return None
     points = []
     spp = 1
-    scene = mitsuba_cornell(ref.shape[1], ref.shape[0], 1)
     dr.eval(mi.render(scene, spp=1, seed=99))    # warm-up (kernel compilation)
     while spp <= max_spp:
         t0 = time.perf_counter()
@@ -102,7 +109,8 @@ def convergence_mitsuba(variant, max_spp):
 
 
 def section_convergence(scenes, backends, mitsuba_variant, max_spp, r):
-    """{(scene, renderer): [(seconds, spp, relMSE)]}, plus the reference noise per scene."""
+    """{(scene, renderer): [(seconds, spp, relMSE)]}, and {(scene, renderer): the noise of
+    the reference that renderer is measured against} where known."""
     curves, noise = {}, {}
     for name in scenes:
         try:
@@ -111,16 +119,21 @@ def section_convergence(scenes, backends, mitsuba_variant, max_spp, r):
             print(f"bench: no reference for {name} (python -m bench.references on a GPU): "
                   "skipped", file=sys.stderr)
             continue
-        noise[name] = meta.get("noise_relmse")
         for b in backends:
             curves[name, f"pt-render {b}"] = convergence_ours(b, name, max_spp)
-        if mitsuba_variant and name == "cornell-box":
+            noise[name, f"pt-render {b}"] = meta.get("noise_relmse")
+        if mitsuba_variant:
+            peer = f"Mitsuba {mitsuba_variant}"
             try:
-                curves[name, f"Mitsuba {mitsuba_variant}"] = convergence_mitsuba(
-                    mitsuba_variant, max_spp)
+                pts = convergence_mitsuba(mitsuba_variant, name, max_spp)
             except ImportError:
-                print("bench: Mitsuba not installed: no peer in the convergence plot",
-                      file=sys.stderr)
+                print("bench: Mitsuba not installed: no peer curves", file=sys.stderr)
+                mitsuba_variant = None
+                continue
+            if pts:
+                curves[name, peer] = pts
+                if name != "cornell-box":
+                    noise[name, peer] = load_reference(name, mitsuba=True)[1]["noise_relmse"]
     for (scene, name), pts in curves.items():
         for sec, spp, err in pts:
             r.add("convergence", scene, name, "relMSE", err, "", "spp", spp)
@@ -129,9 +142,8 @@ def section_convergence(scenes, backends, mitsuba_variant, max_spp, r):
             t = time_to_threshold([p[0] for p in pts], [p[2] for p in pts], th)
             r.add("convergence", scene, name, "time_to_relMSE", "" if t is None else t,
                   "s", "threshold", th)
-    for scene, v in noise.items():
-        if v is not None:
-            r.add("convergence", scene, "reference", "noise_relMSE", v, "")
+        if noise.get((scene, name)) is not None:
+            r.add("convergence", scene, name, "reference_noise_relMSE", noise[scene, name], "")
     _plot_convergence(curves, os.path.join(r.out, "convergence.png"))
     return curves, noise
 
@@ -396,8 +408,10 @@ def summary(r, res, args):
              f"- versions: {versions()}", ""]
     if curves:
         lines += ["## Error against run time", "",
-                  "relMSE against each scene's reference (the Cornell box: Mitsuba 3's; the "
-                  "others: ours at high spp, `bench/references/`), compile excluded.", "",
+                  "relMSE against each scene's reference, compile excluded. The Cornell box: "
+                  "Mitsuba 3's reference (shared/reference) for both renderers. The others: "
+                  "each renderer's own high-spp reference (`bench/references/`), so each "
+                  "curve is that renderer's noise alone.", "",
                   "| scene | renderer | time to relMSE 1e-2 | time to relMSE 1e-3 | "
                   "last spp | last seconds | last relMSE | reference noise |",
                   "|---|---|---|---|---|---|---|---|"]
@@ -405,7 +419,7 @@ def summary(r, res, args):
             tt = [time_to_threshold([p[0] for p in pts], [p[2] for p in pts], th)
                   for th in THRESHOLDS]
             sec, spp, err = pts[-1]
-            nz = noise.get(scene)
+            nz = noise.get((scene, name))
             lines.append(f"| {scene} | {name} | {_fmt_time(tt[0])} | {_fmt_time(tt[1])} | "
                          f"{spp} | {sec:.3g} | {err:.3g} | "
                          f"{'' if nz is None else f'{nz:.2g}'} |")

@@ -66,8 +66,10 @@ def bunny_studio(res):
 def sun(res):
     """Suzanne (rough gold) and a diffuse sphere on a floor under rooitou park, whose
     unclipped sun (about 65% of the map's power in 0.02% of its texels) casts hard shadows:
-    the hard case for environment sampling."""
-    suzanne = os.path.join(SCENES_DIR, "assets", "suzanne_uv.obj")
+    the hard case for environment sampling. This Suzanne carries its own vertex normals, so
+    that Mitsuba shades it with the same normals (each renderer computes missing ones its
+    own way)."""
+    suzanne = os.path.join(MODELS, "suzanne.obj")
     sphere = os.path.join(SCENES_DIR, "assets", "sphere.obj")
     return {
         "camera": {"resolution": list(res), "position": [0.0, 1.3, 2.6],
@@ -104,15 +106,16 @@ def convergence_desc(name):
     return desc
 
 
-def reference_path(name):
-    return os.path.join(REFERENCES, f"{name}.npz")
+def reference_path(name, mitsuba=False):
+    return os.path.join(REFERENCES, f"{name}{'-mitsuba' if mitsuba else ''}.npz")
 
 
-def load_reference(name):
-    """(image, metadata) of a scene's reference; FileNotFoundError when it was not made."""
+def load_reference(name, mitsuba=False):
+    """(image, metadata) of a scene's reference (ours, or with ``mitsuba`` Mitsuba's own);
+    FileNotFoundError when it was not made. The Cornell box has one: Mitsuba's."""
     if name == "cornell-box":
         return np.load(CORNELL_REF), {"source": "Mitsuba 3 (shared/reference/cornell-box)"}
-    with np.load(reference_path(name), allow_pickle=False) as z:
+    with np.load(reference_path(name, mitsuba), allow_pickle=False) as z:
         return z["image"], json.loads(str(z["meta"]))
 
 

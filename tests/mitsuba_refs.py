@@ -5,7 +5,7 @@
 Each case is a smooth sphere lit by ../shared/assets/hdri/studio_small_03_1k.hdr (Mitsuba's
 `envmap` turned 180 degrees about +Y, which matches the scene format's mapping), seen by a
 40x40 perspective camera, path traced with max_depth = maxBounces + 1. The principled
-parameters are written in the scene format's names; MITSUBA_NAMES translates them. The
+parameters are written in the scene format's names; bench.mitsuba_scenes translates them. The
 images go to tests/references/<case>.npy with their settings in references.json.
 """
 import datetime
@@ -15,6 +15,8 @@ import platform
 import sys
 
 import numpy as np
+
+from bench.mitsuba_scenes import mitsuba_bsdf
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REF_DIR = os.path.join(HERE, "references")
@@ -63,12 +65,6 @@ def env_for(case, shared):
             gradient_sky()
         return GRADIENT
     return os.path.join(shared, "assets", "hdri", HDRI)
-
-MITSUBA_NAMES = {"albedo": "base_color", "roughness": "roughness", "metallic": "metallic",
-                 "specular": "specular", "specularTint": "spec_tint",
-                 "anisotropic": "anisotropic", "sheen": "sheen", "sheenTint": "sheen_tint",
-                 "clearcoat": "clearcoat", "clearcoatGloss": "clearcoat_gloss",
-                 "subsurface": "flatness", "transmission": "spec_trans", "eta": "eta"}
 
 BASE = [0.8, 0.45, 0.2]
 DARK = [0.04, 0.03, 0.02]
@@ -152,20 +148,6 @@ def our_scene(material, env_path, spp=64, seed=0):
         "objects": [{"name": "sphere", "file": SPHERE, "material": "m", "smooth": True}],
         "environment": {"file": env_path},
     }
-
-
-def mitsuba_bsdf(material):
-    if material.get("type") == "diffuse":
-        return {"type": "diffuse", "reflectance": {"type": "rgb", "value": material["albedo"]}}
-    if material.get("roughness") == 0.0 and material.get("transmission") == 1.0:
-        return {"type": "dielectric", "int_ior": material["eta"], "ext_ior": 1.0}
-    out = {"type": "principled"}
-    for k, v in material.items():
-        if k == "albedo":
-            out["base_color"] = {"type": "rgb", "value": v}
-        else:
-            out[MITSUBA_NAMES[k]] = v
-    return out
 
 
 def render_mitsuba(material, hdri_path, spp, variant="llvm_ad_rgb"):
