@@ -42,11 +42,11 @@ def versions():
     import numpy
     v = {"python": platform.python_version(), "numpy": numpy.__version__,
          "numba": numba.__version__}
-    try:
-        import numba_cuda
-        v["numba-cuda"] = numba_cuda.__version__
-    except ImportError:
-        pass
+    for name in ("numba_cuda", "mitsuba"):
+        try:
+            v[name.replace("_", "-")] = __import__(name).__version__
+        except ImportError:
+            pass
     return v
 
 

@@ -364,10 +364,12 @@ def _plot_scaling(recs, path, backend_name):
     plt.close(fig)
 
 
-def compile_scenes(out_dir):
+def compile_scenes():
     """(label, scene file) per kernel feature set: the sun scene is written out as a file."""
+    import tempfile
+
     from bench.scenes import SCENES_DIR, sun
-    sun_file = os.path.join(out_dir, "sun-scene.json")
+    sun_file = os.path.join(tempfile.mkdtemp(prefix="pt-render-bench-"), "sun-scene.json")
     with open(sun_file, "w") as f:
         json.dump(sun((64, 64)), f)
     return [("cornell-box", os.path.join(SCENES_DIR, "cornell-box.json")),
@@ -427,14 +429,15 @@ def summary(r, res, args):
     thr = res["throughput"]
     if thr:
         lines += ["", "## Throughput (Cornell box)", "",
-                  "| renderer | M camera paths/s | M rays/s | bounce rays/path | "
-                  "shadow rays/path |", "|---|---|---|---|---|"]
+                  "| renderer | M camera paths/s | M rays/s: camera | bounce | shadow | all |",
+                  "|---|---|---|---|---|---|"]
         for name, rec in thr.items():
             paths = rec["paths_per_s"]
-            rays = paths * (1 + rec["bounce_rays_per_path"] + rec["shadow_rays_per_path"])
-            lines.append(f"| {name} | {paths / 1e6:.3g} | {rays / 1e6:.3g} | "
-                         f"{rec['bounce_rays_per_path']:.3f} | "
-                         f"{rec['shadow_rays_per_path']:.3f} |")
+            bounce = paths * rec["bounce_rays_per_path"]
+            shadow = paths * rec["shadow_rays_per_path"]
+            lines.append(f"| {name} | {paths / 1e6:.3g} | {paths / 1e6:.3g} | "
+                         f"{bounce / 1e6:.4g} | {shadow / 1e6:.4g} | "
+                         f"{(paths + bounce + shadow) / 1e6:.4g} |")
     if res["filtering"]:
         lines += ["", "## Texture filtering (textured.json)", "",
                   "| filter | M camera paths/s |", "|---|---|"]
@@ -574,7 +577,7 @@ def main(argv=None):
         res["scaling"] = section_scaling(b, _scaling_meshes(args), mres[0], mres[1],
                                          3 if args.quick else 5, r)
     if "compile" in want:
-        scenes = compile_scenes(out)
+        scenes = compile_scenes()
         res["compile"] = section_compile([b], scenes[:1] if args.tiny else
                                          scenes[::2] if args.quick else scenes, r)
     r.write()

@@ -79,9 +79,22 @@ def measure(obj, backend_name, res, spp, repeats):
                                                    scene.rr_depth), repeats)
     rec["paths_per_s"] = res[0] * res[1] * spp / t
     rec["ns_per_path"] = 1e9 * t / (res[0] * res[1] * spp)
-    # peak resident memory of this process (Linux: KiB), import and kernel included
-    rec["peak_rss_bytes"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    rec["peak_rss_bytes"] = peak_rss()
     return rec
+
+
+def peak_rss():
+    """Peak resident memory of this process, import and kernels included. Linux's VmHWM
+    starts afresh at exec; ru_maxrss does not (a child started by a big parent inherits the
+    parent's size), so it is only the fallback."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 
 
 def run(obj, backend_name, res, spp, repeats):
