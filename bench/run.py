@@ -33,7 +33,7 @@ from bench.metrics import rays_per_second, relmse, time_to_threshold  # noqa: E4
 from bench.scenes import CONVERGENCE, convergence_desc, load_reference, mesh_desc  # noqa: E402,E501
 
 FIELDS = ["section", "scene", "renderer", "parameter", "value", "metric", "result", "unit",
-          "command", "machine", "date"]
+          "command", "machine", "date", "versions"]
 THRESHOLDS = (1e-2, 1e-3)
 SECTIONS = ("convergence", "throughput", "filtering", "blocks", "bvh", "scaling", "compile")
 
@@ -42,7 +42,8 @@ class Results:
     def __init__(self, out):
         self.out = out
         self.rows = []
-        self.context = {"command": command(), "machine": machine(), "date": now()}
+        self.context = {"command": command(), "machine": machine(), "date": now(),
+                        "versions": " ".join(f"{k}={v}" for k, v in versions().items())}
 
     def add(self, section, scene, renderer, metric, result, unit, parameter="", value=""):
         self.rows.append(dict(section=section, scene=scene, renderer=renderer,
@@ -407,7 +408,7 @@ def summary(r, res, args):
     curves, noise = res["convergence"]
     lines = [f"# Benchmark run ({r.context['date']})", "",
              f"- command: `{r.context['command']}`", f"- machine: {r.context['machine']}",
-             f"- versions: {versions()}", ""]
+             f"- versions: {r.context['versions']}", ""]
     if curves:
         lines += ["## Error against run time", "",
                   "relMSE against each scene's reference, compile excluded. The Cornell box: "

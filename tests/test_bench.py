@@ -64,6 +64,7 @@ def test_quick_mode_writes_csv_plot_and_summary(tmp_path):
     assert {"convergence", "throughput", "filtering", "bvh", "scaling", "compile"} <= sections
     for row in rows:
         assert row["command"] and row["machine"] and row["date"]
+        assert "numba=" in row["versions"]
     from bench.scenes import CONVERGENCE
     assert {row["scene"] for row in rows if row["section"] == "convergence"} == set(CONVERGENCE)
     for png in ("convergence.png", "scaling.png"):
