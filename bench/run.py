@@ -8,11 +8,12 @@ markdown summary.
     python -m bench --gpu              # CUDA (H100 / H200), with Mitsuba's cuda variant if installed
     python -m bench --quick --tiny     # seconds: what CI runs
 
-Mitsuba 3 (`pip install -e .[bench]`) is measured in the same run on the scene both
-renderers express identically (the Cornell box), on the same device kind (llvm on the CPU,
-cuda on the GPU). The other scenes' references are made on a GPU by `python -m
-bench.references` and committed; the big meshes are made by shared/tools/make_big_mesh.py
-into bench/out/meshes/ on first use.
+Mitsuba 3 (`pip install -e .[bench]`) is measured in the same run, on the same device kind
+(llvm on the CPU, cuda on the GPU), on every scene `bench.mitsuba_scenes` can express. The
+Cornell box is measured against Mitsuba's reference by both renderers; the other scenes
+against each renderer's own high-spp reference, made on a GPU by `python -m bench.references`
+and committed. The big meshes are made by shared/tools/make_big_mesh.py into
+bench/out/meshes/ on first use.
 """
 import argparse
 import csv
@@ -30,7 +31,8 @@ if ROOT not in sys.path:
 
 from bench.common import command, machine, now, versions  # noqa: E402
 from bench.metrics import rays_per_second, relmse, time_to_threshold  # noqa: E402
-from bench.scenes import CONVERGENCE, convergence_desc, load_reference, mesh_desc  # noqa: E402,E501
+from bench.scenes import (CONVERGENCE, convergence_desc, load_reference,  # noqa: E402
+                          mesh_desc)
 
 FIELDS = ["section", "scene", "renderer", "parameter", "value", "metric", "result", "unit",
           "command", "machine", "date", "versions"]
