@@ -116,3 +116,40 @@ def test_committed_references_are_converged_and_match_their_scenes():
         assert meta["spp"] >= 16384 and meta["noise_relmse"] < 1e-4, meta
         for key in ("command", "machine", "date"):
             assert meta[key]
+
+
+def _block_means(x, k=16):
+    h, w, c = x.shape
+    return x[:h // k * k, :w // k * k].reshape(h // k, k, w // k, k, c).mean((1, 3))
+
+
+def _reference_mismatch(desc, reference, spp=32):
+    """Two independent CPU renders a, c of ``desc`` against a reference, in 16x16-pixel
+    block means (so that noise is small): relMSE((a + c) / 2, ref) / relMSE(a, c). If the
+    reference is the noise-free image of this scene the ratio is 1/4 (the mean carries half
+    the variance of one render, a - c twice it); any difference between the scene and the
+    reference's scene adds to the numerator only."""
+    from pathtracer.backends import make_backend
+    from pathtracer.render import render
+    from pathtracer.scene import compile_scene
+    scene = compile_scene(desc)
+    backend = make_backend("cpu", scene)
+    a, c = (_block_means(render(scene, backend, spp=spp, seed=s).film.image())
+            for s in (11, 12))
+    return relmse((a + c) / 2, _block_means(reference)) / relmse(a, c)
+
+
+@needs_shared
+def test_committed_references_are_the_current_scenes():
+    """A reference made before a scene was edited would measure error against the wrong
+    image: each committed reference must be the limit of its scene as defined now."""
+    from bench.scenes import CONVERGENCE, convergence_desc, load_reference
+    for name in CONVERGENCE:
+        if name == "cornell-box":
+            continue
+        ratio = _reference_mismatch(convergence_desc(name), load_reference(name)[0])
+        assert ratio < 0.4, (name, ratio)
+    # the check's power: the bunny 10% rougher is caught
+    desc = convergence_desc("bunny-studio")
+    desc.materials["bunny"].numbers["roughness"] *= 1.1
+    assert _reference_mismatch(desc, load_reference("bunny-studio")[0]) > 0.4
