@@ -12,7 +12,7 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from pathtracer.imageio_utils import linear_to_srgb, write_image  # noqa: E402
+from pathtracer.film import linear_to_srgb, write_image  # noqa: E402
 from pathtracer.scene.images import read_image, srgb_to_linear  # noqa: E402
 
 

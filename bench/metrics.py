@@ -1,7 +1,7 @@
 """The benchmark's own metrics, kept small so that tests can pin them down."""
 import math
 
-from pathtracer.metrics import relmse  # noqa: F401  (the one relMSE definition)
+from pathtracer.film import relmse  # noqa: F401  (the one relMSE definition)
 
 
 def time_to_threshold(times, errors, threshold):

@@ -66,7 +66,7 @@ def make_reference(name, spp, backend_name):
 def make_mitsuba_reference(name, spp, variant, chunk=1024):
     import mitsuba as mi
 
-    from bench.mitsuba_scenes import mitsuba_dict
+    from pathtracer.mitsuba import mitsuba_dict
     mi.set_variant(variant)
     scene = mi.load_dict(mitsuba_dict(convergence_desc(name)))
     halves, t0 = [], time.perf_counter()
@@ -100,7 +100,7 @@ def main(argv=None):
     os.makedirs(a.out, exist_ok=True)
     for name in a.scenes:
         if a.mitsuba:
-            from bench.mitsuba_scenes import NotExpressible
+            from pathtracer.mitsuba import NotExpressible
             try:
                 image, meta = make_mitsuba_reference(name, a.spp, a.mitsuba)
             except NotExpressible as e:

@@ -9,7 +9,7 @@ markdown summary.
     python -m bench --quick --tiny     # seconds: what CI runs
 
 Mitsuba 3 (`pip install -e .[bench]`) is measured in the same run, on the same device kind
-(llvm on the CPU, cuda on the GPU), on every scene `bench.mitsuba_scenes` can express. The
+(llvm on the CPU, cuda on the GPU), on every scene `pathtracer.mitsuba` can express. The
 Cornell box is measured against Mitsuba's reference by both renderers; the other scenes
 against each renderer's own high-spp reference, made on a GPU by `python -m bench.references`
 and committed. The big meshes are made by shared/tools/make_big_mesh.py into
@@ -89,7 +89,7 @@ def convergence_mitsuba(variant, name, max_spp):
     import mitsuba as mi
 
     from bench.common import mitsuba_cornell
-    from bench.mitsuba_scenes import NotExpressible, mitsuba_dict
+    from pathtracer.mitsuba import NotExpressible, mitsuba_dict
     mi.set_variant(variant)
     try:
         ref, _ = load_reference(name, mitsuba=True)

@@ -1,7 +1,7 @@
 """pt-render: a physically based path tracer; one Numba kernel source for CPU and CUDA."""
-from . import _jitcache
+from . import _cache
 
-_jitcache.configure()   # before any cached function is decorated (see _jitcache)
+_cache.configure()   # before any cached function is decorated (see _cache)
 
 from .scene import SceneError, load_scene  # noqa: E402
 from .render import render  # noqa: E402

@@ -6,8 +6,7 @@ import signal
 import sys
 import time
 
-from .imageio_utils import ALL_FORMATS, FLOAT_FORMATS, read_image, write_image
-from .metrics import relmse
+from .film import ALL_FORMATS, read_image, relmse, write_image
 from .scene import SceneError
 
 

@@ -2,36 +2,7 @@
 import time
 from dataclasses import dataclass, field
 
-import numpy as np
-
-
-@dataclass
-class Film:
-    height: int
-    width: int
-    sum: np.ndarray = None
-    spp: int = 0
-    bounce_rays: int = 0
-    shadow_rays: int = 0
-    nonfinite: int = 0
-
-    def __post_init__(self):
-        self.sum = np.zeros((self.height, self.width, 3), np.float64)
-
-    def add(self, pass_sum, stats, n_samples):
-        self.sum += pass_sum
-        self.spp += n_samples
-        totals = stats.reshape(-1, 3).sum(axis=0, dtype=np.int64)
-        self.bounce_rays += int(totals[0])
-        self.shadow_rays += int(totals[1])
-        self.nonfinite += int(totals[2])
-
-    def image(self):
-        return (self.sum / max(self.spp, 1)).astype(np.float32)
-
-    @property
-    def camera_rays(self):
-        return self.spp * self.width * self.height
+from .film import Film
 
 
 @dataclass

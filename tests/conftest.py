@@ -10,17 +10,9 @@ SHARED = os.environ.get("PT_RENDER_SHARED") or os.path.join(os.path.dirname(ROOT
 sys.path.insert(0, ROOT)
 
 
-def cuda_gpu():
-    if os.environ.get("NUMBA_ENABLE_CUDASIM") == "1":
-        return False
-    try:
-        from numba import cuda
-        return bool(cuda.is_available())
-    except Exception:
-        return False
+from pathtracer.backends import cuda_available  # noqa: E402
 
-
-HAS_GPU = cuda_gpu()
+HAS_GPU = cuda_available()
 gpu = pytest.mark.skipif(not HAS_GPU, reason="needs a CUDA GPU")
 needs_shared = pytest.mark.skipif(not os.path.isdir(SHARED), reason="needs ../shared")
 

@@ -5,7 +5,7 @@
 Each case is a smooth sphere lit by ../shared/assets/hdri/studio_small_03_1k.hdr (Mitsuba's
 `envmap` turned 180 degrees about +Y, which matches the scene format's mapping), seen by a
 40x40 perspective camera, path traced with max_depth = maxBounces + 1. The principled
-parameters are written in the scene format's names; bench.mitsuba_scenes translates them. The
+parameters are written in the scene format's names; pathtracer.mitsuba translates them. The
 images go to tests/references/<case>.npy with their settings in references.json.
 """
 import datetime
@@ -16,7 +16,7 @@ import sys
 
 import numpy as np
 
-from bench.mitsuba_scenes import mitsuba_bsdf
+from pathtracer.mitsuba import mitsuba_bsdf
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REF_DIR = os.path.join(HERE, "references")
@@ -54,7 +54,7 @@ def gradient_sky(path=GRADIENT, w=2048, h=1024):
            (0.5 + 0.5 * u[None, :, None]))
     lobe = np.exp(8 * (d @ np.array([0.6, 0.6, 0.53]) - 1))[..., None] * np.array([4, 3.5, 3])
     img = (img + lobe).astype(np.float32)
-    from pathtracer.imageio_utils import write_image
+    from pathtracer.film import write_image
     write_image(path, img)
     return path
 

@@ -44,7 +44,7 @@ def test_counted_rays_match_a_traced_path(tmp_path):
     scatters maxBounces times, tracing one shadow ray and one bounce ray per event."""
     from pathtracer.backends import make_backend
     from pathtracer.scene import load_scene
-    from tests.scenes import furnace_scene, write_scene
+    from tests.helpers import furnace_scene, write_scene
     d = furnace_scene(0.5, 0.0, 3, res=(4, 4))
     d["lights"] = [{"position": [0, 0, 0], "intensity": 1}]
     d["render"]["rrDepth"] = 100

@@ -9,9 +9,9 @@ import time
 import numpy as np
 import pytest
 
-from pathtracer.imageio_utils import read_image, write_image
+from pathtracer.film import read_image, write_image
 from tests.conftest import ROOT
-from tests.scenes import furnace_scene, write_scene
+from tests.helpers import furnace_scene, write_scene
 
 
 def pt_render(*args, **kw):

@@ -16,7 +16,7 @@ sys.path.insert(0, sys.argv[1])
 from pathtracer.scene import load_scene, load_scene_description, compile_scene
 from pathtracer.backends.cuda import CUDABackend
 from pathtracer.backends.cpu import CPUBackend
-from tests.scenes import furnace_scene, write_scene
+from tests.helpers import furnace_scene, write_scene
 out = {}
 d = load_scene_description(sys.argv[1] + "/scenes/cornell-box.json")
 d.camera.resolution = (6, 5)

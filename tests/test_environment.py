@@ -11,13 +11,13 @@ from numba import njit
 from pathtracer.kernels.envmap import env_eval, env_pdf, env_sample, env_uv
 from pathtracer.kernels.rng import path_key, sample_1d
 from pathtracer.scene import load_scene
-from pathtracer.scene.compile import environment_distribution
+from pathtracer.kernels.envmap import environment_tables
 from pathtracer.scene.images import read_image
-from pathtracer.imageio_utils import write_image
+from pathtracer.film import write_image
 from tests.conftest import BACKENDS, SHARED, needs_shared
-from tests.scenes import sphere_mesh, write_scene
-from tests.test_render import mean_and_se, run
-from tests.test_sampling import chi2_test
+from tests.helpers import sphere_mesh, write_scene
+from tests.helpers import mean_and_se, run
+from tests.helpers import chi2_test
 
 
 def info(rotation_deg=0.0):
@@ -65,7 +65,7 @@ def _integral(pdf, inf, n_t, n_p, sub):
 
 
 def _check_sampling(img, rotation, n=400_000, n_t=32, n_p=64, sub=6):
-    img32, marg, cond, pdf = environment_distribution(img)
+    img32, marg, cond, pdf = environment_tables(img)
     inf = info(rotation)
     h, bad = _hist(marg, cond, pdf, inf, n, n_t, n_p)
     # the direction -> (u, v) round trip may land in the neighbouring cell by rounding

@@ -3,7 +3,7 @@ import numpy as np
 
 from pathtracer.kernels.rng import path_key, sample_1d
 from tests.conftest import gpu
-from tests.test_rng import GOLDEN, _python_values
+from tests.helpers import GOLDEN, golden_python_values as _python_values
 
 
 @gpu
@@ -43,8 +43,8 @@ def _full_feature_scene(tmp_path):
     emissive triangles, a point light, an HDRI, smooth normals and a thin lens."""
     import imageio.v3 as iio
 
-    from pathtracer.imageio_utils import write_image
-    from tests.scenes import sphere_mesh, write_scene
+    from pathtracer.film import write_image
+    from tests.helpers import sphere_mesh, write_scene
     rng = np.random.default_rng(0)
     iio.imwrite(tmp_path / "a.png", rng.integers(0, 255, (8, 8, 3), dtype=np.uint8))
     iio.imwrite(tmp_path / "n.png", np.full((4, 4, 3), [128, 160, 230], np.uint8))

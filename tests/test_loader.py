@@ -9,7 +9,7 @@ import pytest
 
 from pathtracer.scene import SceneError, load_scene, load_scene_description
 from tests.conftest import ROOT
-from tests.scenes import box_mesh, write_scene
+from tests.helpers import box_mesh, write_scene
 
 CORNELL = os.path.join(ROOT, "scenes", "cornell-box.json")
 

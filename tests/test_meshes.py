@@ -6,7 +6,7 @@ import numpy as np
 from pathtracer.scene import load_scene
 from pathtracer.scene.meshes import load_obj
 from tests.conftest import needs_shared, ROOT, SHARED
-from tests.scenes import write_scene
+from tests.helpers import write_scene
 
 
 def test_cache_hit_and_invalidation(tmp_path, monkeypatch):

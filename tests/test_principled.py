@@ -8,21 +8,11 @@ import numpy as np
 import pytest
 from numba import njit
 
-from pathtracer.kernels.principled import P_FIELDS, principled_eval, principled_sample
+from pathtracer.kernels.principled import principled_eval, principled_sample
 from pathtracer.kernels.rng import path_key, sample_1d
-from tests.test_sampling import chi2_test
+from tests.helpers import chi2_test, principled_params as params
 
 F = np.float32
-
-
-def params(**kw):
-    d = dict(r=0.8, g=0.5, b=0.3, roughness=0.5, metallic=0.0, eta=1.5, spec_tint=0.0,
-             anisotropic=0.0, sheen=0.0, sheen_tint=0.0, clearcoat=0.0, clearcoat_gloss=0.0,
-             flatness=0.0, transmission=0.0)
-    for k, v in kw.items():
-        assert k in d, k
-        d[k] = v
-    return tuple(F(d[k]) for k in P_FIELDS)
 
 
 def direction(cos_theta, phi=0.3):

@@ -5,28 +5,16 @@ import numpy as np
 import pytest
 
 from pathtracer.backends import make_backend
-from pathtracer.metrics import relmse
+from pathtracer.film import relmse
 from pathtracer.render import render
 from pathtracer.scene import load_scene
 from tests.conftest import BACKENDS, ROOT, SHARED, gpu, needs_shared
-from tests.scenes import furnace_scene, write_scene
+from tests.helpers import furnace_scene, mean_and_se, run, write_scene
 
 CORNELL = os.path.join(ROOT, "scenes", "cornell-box.json")
 CORNELL_REF = os.path.join(SHARED, "reference", "cornell-box", "reference_256_d8.npy")
 REF_NOISE = 1.95e-5          # the reference's own relMSE (reference_256_d8.json)
 MITSUBA_RELMSE_SPP = 0.28    # Mitsuba independent sampler: relMSE ~ 0.28 / spp
-
-
-def run(scene, backend="cpu", spp=None, **kw):
-    result = render(scene, make_backend(backend, scene), spp=spp, **kw)
-    assert result.film.nonfinite == 0, "NaN or Inf samples"
-    return result
-
-
-def mean_and_se(img):
-    """Image mean per channel and its standard error (pixels are independent)."""
-    px = img.reshape(-1, 3).astype(np.float64)
-    return px.mean(0), px.std(0, ddof=1) / np.sqrt(len(px))
 
 
 @needs_shared
@@ -127,7 +115,7 @@ def test_constant_environment(tmp_path, backend):
 def test_smooth_normals_render_finite(tmp_path):
     """Smooth shading on a coarse sphere lit by a point light: finite, no leaks on the
     unlit side (a shading normal never brings light below the geometric surface)."""
-    from tests.scenes import sphere_mesh
+    from tests.helpers import sphere_mesh
     v, f = sphere_mesh(6, 12)
     scene_dict = {
         "camera": {"resolution": [32, 32], "position": [0, 0, 4], "lookAt": [0, 0, 0],

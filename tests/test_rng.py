@@ -3,14 +3,9 @@ import numpy as np
 from numba import njit
 
 from pathtracer.kernels.rng import path_key, pcg_hash, sample_1d
+from tests.helpers import GOLDEN, golden_python_values as _python_values
 
 # First values of the stream, pinned: a change here changes every image.
-GOLDEN = [(0, 0, 0, 0), (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (0, 0, 0, 1),
-          (65535, 1023, 17, 123456789)]
-
-
-def _python_values():
-    return [float(sample_1d(path_key(p, s, seed), d)) for p, s, d, seed in GOLDEN]
 
 
 @njit(cache=True)
@@ -47,7 +42,7 @@ def test_python_and_cpu_agree_bit_for_bit():
 def test_uniform_pairs_chi2():
     """Consecutive dimensions of many paths fill the unit square uniformly (chi-square on
     a 16x16 grid; p-value threshold 1e-4)."""
-    from tests.scipy_free_stats import chi2_sf
+    from tests.helpers import chi2_sf
     n = 200_000
     keys = [path_key(i % 4096, i // 4096, 7) for i in range(0, n)]
     u = np.array([sample_1d(k, 4) for k in keys], np.float64)

@@ -10,33 +10,9 @@ from pathtracer.kernels.vec import frame, to_world
 from pathtracer.kernels.rng import path_key, sample_1d
 from pathtracer.kernels.warps import (power_heuristic, square_to_cosine_hemisphere,
                                       square_to_disk_concentric)
-from tests.scipy_free_stats import chi2_sf
+from tests.helpers import chi2_test
 
 N = 200_000
-
-
-def chi2_test(observed, expected, min_expected=5.0, alpha=1e-4):
-    o = np.asarray(observed, float).ravel()
-    e = np.asarray(expected, float).ravel()
-    assert not np.any((e == 0) & (o > 0)), "samples where the pdf is zero"
-    order = np.argsort(e)
-    o, e = o[order], e[order]
-    # pool the smallest cells until each pooled cell expects >= min_expected
-    pooled_o, pooled_e, acc_o, acc_e = [], [], 0.0, 0.0
-    for oi, ei in zip(o, e):
-        acc_o += oi
-        acc_e += ei
-        if acc_e >= min_expected:
-            pooled_o.append(acc_o)
-            pooled_e.append(acc_e)
-            acc_o = acc_e = 0.0
-    if acc_e > 0 and pooled_e:
-        pooled_o[-1] += acc_o
-        pooled_e[-1] += acc_e
-    po, pe = np.array(pooled_o), np.array(pooled_e)
-    stat = ((po - pe) ** 2 / pe).sum()
-    p = chi2_sf(stat, len(pe) - 1)
-    assert p > alpha, f"chi2 = {stat:.1f} with {len(pe) - 1} dof, p = {p:.2e}"
 
 
 @njit(cache=True)

@@ -11,9 +11,9 @@ import pytest
 from pathtracer.kernels.principled import principled_eval, principled_sample
 from pathtracer.scene import load_scene
 from tests.conftest import ROOT, SHARED, needs_shared
-from tests.scenes import sphere_mesh, write_scene
-from tests.test_principled import params
-from tests.test_render import mean_and_se, run
+from tests.helpers import sphere_mesh, write_scene
+from tests.helpers import principled_params as params
+from tests.helpers import mean_and_se, run
 
 F = np.float32
 CORNELL = os.path.join(ROOT, "scenes", "cornell-box.json")
@@ -130,7 +130,7 @@ def test_shadow_terminator_lift_reaches_the_smooth_surface():
     """On a coarse sphere (vertices on the unit sphere, exact vertex normals) the lifted
     point moves outwards only and lands closer to the sphere than the facet point; on a
     flat patch (equal normals) it does not move."""
-    from pathtracer.kernels.integrator import terminator_lift
+    from pathtracer.kernels.surface import terminator_lift
     rng = np.random.default_rng(4)
     ratios = []
     for _ in range(200):

@@ -10,12 +10,12 @@ import pytest
 from pathtracer.kernels.camera import thin_lens_ray
 from pathtracer.kernels.textures import tex_lookup
 from pathtracer.scene import load_scene
-from pathtracer.scene.compile import _vertex_tangents
+from pathtracer.scene.geometry import vertex_tangents
 from pathtracer.scene.errors import SceneError
 from pathtracer.scene.images import srgb_to_linear
 from tests.conftest import SHARED, needs_shared
-from tests.scenes import write_scene
-from tests.test_render import mean_and_se, run
+from tests.helpers import write_scene
+from tests.helpers import mean_and_se, run
 
 F = np.float32
 
@@ -111,9 +111,9 @@ def test_tangents_follow_u():
     pos = np.array([[[0, 0, 0], [2, 0, 0], [0, 3, 0]]], float)
     nrm = np.array([[[0, 0, 1]] * 3], float)
     uv = np.array([[[0, 0], [1, 0], [0, 1]]], float)
-    t, s = _vertex_tangents(pos, nrm, uv)
+    t, s = vertex_tangents(pos, nrm, uv)
     assert np.allclose(t, [1, 0, 0]) and np.all(s == 1)
-    t, s = _vertex_tangents(pos, nrm, uv[:, :, ::-1].copy())   # u along y, mirrored
+    t, s = vertex_tangents(pos, nrm, uv[:, :, ::-1].copy())   # u along y, mirrored
     assert np.allclose(t, [0, 1, 0]) and np.all(s == -1)
 
 
@@ -180,7 +180,7 @@ def test_thesis_folder_missing_files_are_named(tmp_path):
 def test_texture_formats(tmp_path, ext):
     """PNG, JPG, BMP (the thesis renderer's format) and Radiance HDR all read, with the
     right orientation (row 0 is the top: v = 1)."""
-    from pathtracer.imageio_utils import write_image
+    from pathtracer.film import write_image
     from pathtracer.scene.images import load_texture
     from pathtracer.scene.loader import TextureSpec
     img = np.zeros((16, 16, 3), np.uint8)

@@ -13,6 +13,9 @@ import numpy as np
 from numba import njit
 
 from ..kernels.constants import STACK_SIZE
+from ..kernels.layout import (BOX_CHILD0, BOX_CHILD1, BOX_MAX, BOX_MIN, BOX_STRIDE, BOX_WIDTH,
+                              CHILD0_COUNT, CHILD0_INDEX, CHILD1_COUNT, CHILD1_INDEX,
+                              CHILD_COUNT, CHILD_EMPTY, CHILD_INDEX, CHILD_STRIDE, CHILD_WIDTH)
 
 # SAH constants: cost of one node visit relative to one triangle test.
 C_TRAVERSAL = 1.0
@@ -21,8 +24,8 @@ MAX_DEPTH = STACK_SIZE - 4  # deeper subtrees become leaves: the traversal stack
 
 
 class BVH(NamedTuple):
-    box: np.ndarray    # float32 (M, 12): child 0 min xyz, max xyz, child 1 min xyz, max xyz
-    child: np.ndarray  # int32 (M, 4): c0, n0, c1, n1 (see kernels.traverse)
+    box: np.ndarray    # float32 (M, BOX_WIDTH): both children's boxes (kernels.layout)
+    child: np.ndarray  # int32 (M, CHILD_WIDTH): both children's (index, count)
     order: np.ndarray  # int32 (N,): new triangle k is input triangle order[k]
     depth: int
 
@@ -40,8 +43,8 @@ def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split, midpoint)
     n = tri_lo.shape[0]
     order = np.arange(n).astype(np.int32)
     max_nodes = max(1, n)
-    box = np.zeros((max_nodes, 12), np.float32)
-    child = np.full((max_nodes, 4), -1, np.int32)
+    box = np.zeros((max_nodes, BOX_WIDTH), np.float32)
+    child = np.full((max_nodes, CHILD_WIDTH), CHILD_EMPTY, np.int32)
     n_nodes = 1
     # tasks: (start, end, parent node, side, depth)
     tasks = np.zeros((4 * STACK_SIZE + 8, 5), np.int64)
@@ -64,8 +67,8 @@ def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split, midpoint)
     acc_hi = np.empty(3)
     max_depth = 0
     if n == 0:
-        child[0, 1] = -1
-        child[0, 3] = -1
+        child[0, CHILD0_COUNT] = CHILD_EMPTY
+        child[0, CHILD1_COUNT] = CHILD_EMPTY
         return box, child, order, 1, 0
     while n_tasks > 0:
         n_tasks -= 1
@@ -193,25 +196,27 @@ def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split, midpoint)
             if make_leaf:
                 # A whole scene in one leaf: root with one leaf child and one empty child.
                 for c in range(3):
-                    box[0, c] = lo[c]
-                    box[0, 3 + c] = hi[c]
-                child[0, 0] = start
-                child[0, 1] = count
-                child[0, 2] = 0
-                child[0, 3] = -1
+                    box[0, BOX_CHILD0 + BOX_MIN + c] = lo[c]
+                    box[0, BOX_CHILD0 + BOX_MAX + c] = hi[c]
+                child[0, CHILD0_INDEX] = start
+                child[0, CHILD0_COUNT] = count
+                child[0, CHILD1_INDEX] = 0
+                child[0, CHILD1_COUNT] = CHILD_EMPTY
                 continue
         else:
+            b = BOX_CHILD0 + BOX_STRIDE * side
             for c in range(3):
-                box[parent, 6 * side + c] = lo[c]
-                box[parent, 6 * side + 3 + c] = hi[c]
+                box[parent, b + BOX_MIN + c] = lo[c]
+                box[parent, b + BOX_MAX + c] = hi[c]
+            k = CHILD_STRIDE * side
             if make_leaf:
-                child[parent, 2 * side] = start
-                child[parent, 2 * side + 1] = count
+                child[parent, k + CHILD_INDEX] = start
+                child[parent, k + CHILD_COUNT] = count
                 continue
             node = n_nodes
             n_nodes += 1
-            child[parent, 2 * side] = node
-            child[parent, 2 * side + 1] = 0
+            child[parent, k + CHILD_INDEX] = node
+            child[parent, k + CHILD_COUNT] = 0
         # Children tasks: right first so the left subtree is built (and laid out) first.
         tasks[n_tasks, 0] = mid
         tasks[n_tasks, 1] = end
@@ -252,11 +257,12 @@ def _widen(box):
     whose origin lies exactly on a box face would otherwise get the slab (0 * BIG = 0) and
     miss the box; with widened boxes no triangle vertex lies on a face."""
     out = box.copy()
-    for side in (0, 6):
+    for side in (BOX_CHILD0, BOX_CHILD1):
+        lo = slice(side + BOX_MIN, side + BOX_MIN + 3)
+        hi = slice(side + BOX_MAX, side + BOX_MAX + 3)
         for _ in range(2):
-            out[:, side:side + 3] = np.nextafter(out[:, side:side + 3], np.float32(-np.inf))
-            out[:, side + 3:side + 6] = np.nextafter(out[:, side + 3:side + 6],
-                                                     np.float32(np.inf))
+            out[:, lo] = np.nextafter(out[:, lo], np.float32(-np.inf))
+            out[:, hi] = np.nextafter(out[:, hi], np.float32(np.inf))
     return out
 
 
@@ -266,23 +272,27 @@ def sah_cost(bvh):
     box = bvh.box.astype(np.float64)
     child = bvh.child
 
-    def area(b):
-        d = np.maximum(b[3:6] - b[0:3], 0.0)
+    def corners(k, side):
+        b = BOX_CHILD0 + BOX_STRIDE * side
+        return (box[k, b + BOX_MIN:b + BOX_MIN + 3], box[k, b + BOX_MAX:b + BOX_MAX + 3])
+
+    def area(lo, hi):
+        d = np.maximum(hi - lo, 0.0)
         return 2.0 * (d[0] * d[1] + d[1] * d[2] + d[2] * d[0])
 
-    root_lo = np.minimum(box[0, 0:3], box[0, 6:9])
-    root_hi = np.maximum(box[0, 3:6], box[0, 9:12])
-    if child[0, 3] < 0:
-        root_lo, root_hi = box[0, 0:3], box[0, 3:6]
-    root_area = area(np.concatenate([root_lo, root_hi]))
+    root_lo, root_hi = corners(0, 0)
+    if child[0, CHILD1_COUNT] >= 0:
+        lo1, hi1 = corners(0, 1)
+        root_lo, root_hi = np.minimum(root_lo, lo1), np.maximum(root_hi, hi1)
+    root_area = area(root_lo, root_hi)
     if root_area <= 0:
         return float("nan")
     cost = C_TRAVERSAL  # the root is always visited
     for k in range(box.shape[0]):
         for side in range(2):
-            c, n = child[k, 2 * side], child[k, 2 * side + 1]
+            n = child[k, CHILD_STRIDE * side + CHILD_COUNT]
             if n < 0:
                 continue
-            a = area(box[k, 6 * side:6 * side + 6]) / root_area
+            a = area(*corners(k, side)) / root_area
             cost += a * (C_TRAVERSAL if n == 0 else C_INTERSECT * n)
     return cost

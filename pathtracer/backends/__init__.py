@@ -5,7 +5,12 @@
 """
 
 
-def cuda_available():
+def cuda_available(simulator=False):
+    """Is a CUDA GPU usable? Numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1) counts only
+    with ``simulator``: ``auto`` never picks it, ``--backend cuda`` may use it."""
+    import os
+    if os.environ.get("NUMBA_ENABLE_CUDASIM") == "1":
+        return simulator
     try:
         from numba import cuda
         return bool(cuda.is_available())
@@ -21,7 +26,7 @@ def make_backend(name, scene, **options):
         from .cpu import CPUBackend
         return CPUBackend(scene, **options)
     if name == "cuda":
-        if not cuda_available():
+        if not cuda_available(simulator=True):
             raise RuntimeError("--backend cuda: no CUDA GPU is available (numba.cuda finds none)")
         from .cuda import CUDABackend
         return CUDABackend(scene, **options)

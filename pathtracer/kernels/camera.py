@@ -1,11 +1,13 @@
 """Camera rays.
 
-``cam`` (float32, 16) holds: origin (0:3), unit forward (3:6), right scaled by
-tan(fov_x / 2) (6:9), up scaled by tan(fov_y / 2) (9:12); for the thin lens, the lens radius
-divided by tan(fov_x / 2) and by tan(fov_y / 2) (12, 13) and the focus distance (14).
+``cam`` (float32, CAM_SIZE; the camera section of :mod:`.layout`) holds the eye point, the
+unit forward vector, right and up scaled by tan(fov / 2) and, for the thin lens, the lens
+radius in those units and the focus distance.
 """
 from .constants import ONE, TWO
 from .device import device
+from .layout import (CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_LENS_Y, CAM_ORIGIN, CAM_RIGHT,
+                     CAM_UP)
 from .vec import normalize
 from .warps import square_to_disk_concentric
 
@@ -15,10 +17,10 @@ def pinhole_ray(cam, px, py, u, v, width, height):
     """Ray through image position (px + u, py + v); pixel row 0 is the top of the image."""
     sx = TWO * (px + u) / width - ONE
     sy = ONE - TWO * (py + v) / height
-    d = normalize((cam[3] + sx * cam[6] + sy * cam[9],
-                   cam[4] + sx * cam[7] + sy * cam[10],
-                   cam[5] + sx * cam[8] + sy * cam[11]))
-    return (cam[0], cam[1], cam[2]), d
+    d = normalize((cam[CAM_FORWARD] + sx * cam[CAM_RIGHT] + sy * cam[CAM_UP],
+                   cam[CAM_FORWARD + 1] + sx * cam[CAM_RIGHT + 1] + sy * cam[CAM_UP + 1],
+                   cam[CAM_FORWARD + 2] + sx * cam[CAM_RIGHT + 2] + sy * cam[CAM_UP + 2]))
+    return (cam[CAM_ORIGIN], cam[CAM_ORIGIN + 1], cam[CAM_ORIGIN + 2]), d
 
 
 @device
@@ -30,15 +32,16 @@ def thin_lens_ray(cam, px, py, u, v, lu, lv, width, height):
     sy = ONE - TWO * (py + v) / height
     # Unnormalised pinhole direction: forward component 1, so origin + dir * focus lies on
     # the plane in focus.
-    dx = cam[3] + sx * cam[6] + sy * cam[9]
-    dy = cam[4] + sx * cam[7] + sy * cam[10]
-    dz = cam[5] + sx * cam[8] + sy * cam[11]
-    f = cam[14]
+    dx = cam[CAM_FORWARD] + sx * cam[CAM_RIGHT] + sy * cam[CAM_UP]
+    dy = cam[CAM_FORWARD + 1] + sx * cam[CAM_RIGHT + 1] + sy * cam[CAM_UP + 1]
+    dz = cam[CAM_FORWARD + 2] + sx * cam[CAM_RIGHT + 2] + sy * cam[CAM_UP + 2]
+    f = cam[CAM_FOCUS]
     lx, ly = square_to_disk_concentric(lu, lv)
-    lx *= cam[12]
-    ly *= cam[13]
-    ox = cam[0] + lx * cam[6] + ly * cam[9]
-    oy = cam[1] + lx * cam[7] + ly * cam[10]
-    oz = cam[2] + lx * cam[8] + ly * cam[11]
-    d = normalize((cam[0] + dx * f - ox, cam[1] + dy * f - oy, cam[2] + dz * f - oz))
+    lx *= cam[CAM_LENS_X]
+    ly *= cam[CAM_LENS_Y]
+    ox = cam[CAM_ORIGIN] + lx * cam[CAM_RIGHT] + ly * cam[CAM_UP]
+    oy = cam[CAM_ORIGIN + 1] + lx * cam[CAM_RIGHT + 1] + ly * cam[CAM_UP + 1]
+    oz = cam[CAM_ORIGIN + 2] + lx * cam[CAM_RIGHT + 2] + ly * cam[CAM_UP + 2]
+    d = normalize((cam[CAM_ORIGIN] + dx * f - ox, cam[CAM_ORIGIN + 1] + dy * f - oy,
+                   cam[CAM_ORIGIN + 2] + dz * f - oz))
     return (ox, oy, oz), d

@@ -14,8 +14,12 @@ the Jacobian of the mapping, exact (the thesis renderer used 2 pi sin theta, pi 
 
 Arrays: ``env_img`` (H, W, 3) radiance with the intensity applied; ``env_marg`` (H + 1,)
 and ``env_cond`` (H, W + 1) CDFs; ``env_pdf`` (H, W) the density p(u, v) of each cell;
-``env_info`` = (cos rotation, sin rotation, probability that next-event estimation picks
-the environment, 0).
+``env_info`` (see :mod:`.layout`): the rotation's cosine and sine and the probability that
+next-event estimation picks the environment.
+
+The device functions sample and evaluate these tables; :func:`environment_tables`, beside
+them, is the host code (NumPy) that builds them, so the two sides of the density stay
+together.
 """
 import math
 
@@ -23,6 +27,7 @@ import numpy as np
 
 from .constants import HALF, ONE, PI, TWO_PI, ZERO
 from .device import device
+from .layout import ENV_COS_ROT, ENV_SIN_ROT
 from .lights import sample_discrete
 from .warps import sincos
 
@@ -34,8 +39,8 @@ TWO_PI_SQ = np.float32(2.0 * np.pi * np.pi)
 @device
 def env_uv(env_info, d):
     """Texture coordinates (u, v) in [0, 1] of world direction d."""
-    c = env_info[0]
-    s = env_info[1]
+    c = env_info[ENV_COS_ROT]
+    s = env_info[ENV_SIN_ROT]
     x = d[0] * c - d[2] * s
     z = d[0] * s + d[2] * c
     y = min(max(d[1], -ONE), ONE)
@@ -114,9 +119,45 @@ def env_sample(env_marg, env_cond, env_pdf_arr, env_info, u1, u2):
     sin_p, cos_p = sincos(phi)
     xm = sin_t * sin_p
     zm = -sin_t * cos_p
-    c = env_info[0]
-    s = env_info[1]
+    c = env_info[ENV_COS_ROT]
+    s = env_info[ENV_SIN_ROT]
     d = (xm * c + zm * s, cos_t, -xm * s + zm * c)
     if sin_t <= ZERO:
         return d, ZERO
     return d, env_pdf_arr[j, i] / (TWO_PI_SQ * sin_t)
+
+
+# ---- Host side: the tables the functions above read ----------------------------------------
+
+def environment_tables(img):
+    """(image, marginal CDF, conditional CDFs, cell densities) of an equirectangular map
+    (float H x W x 3, linear radiance), or None when it is black everywhere. NumPy, on the
+    host: the piecewise-constant 2-D distribution that :func:`env_sample` draws from and
+    :func:`env_pdf` evaluates."""
+    h, w = img.shape[:2]
+    lum = img @ np.array([0.2126, 0.7152, 0.0722])
+    # mean of the bilinear reconstruction over each cell: [1, 6, 1] / 8 in u (wrapping)
+    # and v (clamped), so a cell is never given zero weight where the lookup is not zero
+    k = (np.roll(lum, 1, axis=1) + 6 * lum + np.roll(lum, -1, axis=1)) / 8
+    up = np.vstack([k[:1], k[:-1]])
+    down = np.vstack([k[1:], k[-1:]])
+    k = (up + 6 * k + down) / 8
+    sin_t = np.sin(np.pi * (np.arange(h) + 0.5) / h)
+    wgt = k * sin_t[:, None]
+    total = wgt.sum()
+    if not total > 0:
+        return None
+    pdf = wgt * (w * h) / total
+    rows = wgt.sum(axis=1)
+    marg = np.concatenate([[0.0], np.cumsum(rows) / rows.sum()])
+    cond = np.zeros((h, w + 1))
+    for j in range(h):
+        if rows[j] > 0:
+            cond[j, 1:] = np.cumsum(wgt[j]) / rows[j]
+        else:
+            cond[j, 1:] = np.arange(1, w + 1) / w
+    marg = marg.astype(np.float32)
+    cond = cond.astype(np.float32)
+    marg[-1] = 1.0
+    cond[:, -1] = 1.0
+    return img.astype(np.float32), marg, cond, pdf.astype(np.float32)

@@ -7,6 +7,7 @@ positively (``u >= 0 and ...``) so that a NaN from a degenerate triangle is a mi
 """
 from .constants import BIG, INF, ONE, SLAB_SCALE, ZERO
 from .device import device
+from .layout import BOX_MAX, BOX_MIN, TRI_E1, TRI_E2, TRI_V0
 
 
 @device
@@ -16,12 +17,12 @@ def ray_triangle(o, d, tri_v, i, t_max):
     Only hits with 0 < t < t_max count. Zero-area triangles (det == 0) and rays parallel to
     the triangle's plane never hit.
     """
-    e1x = tri_v[i, 3]
-    e1y = tri_v[i, 4]
-    e1z = tri_v[i, 5]
-    e2x = tri_v[i, 6]
-    e2y = tri_v[i, 7]
-    e2z = tri_v[i, 8]
+    e1x = tri_v[i, TRI_E1]
+    e1y = tri_v[i, TRI_E1 + 1]
+    e1z = tri_v[i, TRI_E1 + 2]
+    e2x = tri_v[i, TRI_E2]
+    e2y = tri_v[i, TRI_E2 + 1]
+    e2z = tri_v[i, TRI_E2 + 2]
     # p = d x e2
     px = d[1] * e2z - d[2] * e2y
     py = d[2] * e2x - d[0] * e2z
@@ -30,9 +31,9 @@ def ray_triangle(o, d, tri_v, i, t_max):
     if det == ZERO:
         return INF, ZERO, ZERO
     inv_det = ONE / det
-    sx = o[0] - tri_v[i, 0]
-    sy = o[1] - tri_v[i, 1]
-    sz = o[2] - tri_v[i, 2]
+    sx = o[0] - tri_v[i, TRI_V0]
+    sy = o[1] - tri_v[i, TRI_V0 + 1]
+    sz = o[2] - tri_v[i, TRI_V0 + 2]
     b1 = (sx * px + sy * py + sz * pz) * inv_det
     if not (b1 >= ZERO and b1 <= ONE):
         return INF, ZERO, ZERO
@@ -60,16 +61,18 @@ def safe_inverse(d):
 
 @device
 def ray_box(o, inv_d, box, i, j, t_max):
-    """Entry distance of the ray into the box box[i, j:j+6] (min xyz, max xyz), or INF.
+    """Entry distance of the ray into the box that starts at box[i, j] (see layout), or INF.
 
     Slab test; t_far is scaled up by SLAB_SCALE so rounding never culls a touched box.
     """
-    tx0 = (box[i, j] - o[0]) * inv_d[0]
-    tx1 = (box[i, j + 3] - o[0]) * inv_d[0]
-    ty0 = (box[i, j + 1] - o[1]) * inv_d[1]
-    ty1 = (box[i, j + 4] - o[1]) * inv_d[1]
-    tz0 = (box[i, j + 2] - o[2]) * inv_d[2]
-    tz1 = (box[i, j + 5] - o[2]) * inv_d[2]
+    lo = j + BOX_MIN
+    hi = j + BOX_MAX
+    tx0 = (box[i, lo] - o[0]) * inv_d[0]
+    tx1 = (box[i, hi] - o[0]) * inv_d[0]
+    ty0 = (box[i, lo + 1] - o[1]) * inv_d[1]
+    ty1 = (box[i, hi + 1] - o[1]) * inv_d[1]
+    tz0 = (box[i, lo + 2] - o[2]) * inv_d[2]
+    tz1 = (box[i, hi + 2] - o[2]) * inv_d[2]
     t_near = max(max(min(tx0, tx1), min(ty0, ty1)), max(min(tz0, tz1), ZERO))
     t_far = min(min(max(tx0, tx1), max(ty0, ty1)), min(max(tz0, tz1), t_max)) * SLAB_SCALE
     if t_near <= t_far:

@@ -2,7 +2,8 @@
 
 All lights (emissive triangles and point lights) share one discrete distribution,
 ``light_cdf`` (float32, K + 1; cdf[0] = 0, cdf[K] = 1), proportional to emitted power;
-``light_ref[k]`` is the triangle index of light k, or -(p + 1) for point light p. The
+``light_ref[k]`` is the triangle index of light k, or ``layout.point_light_ref(p)`` for
+point light p. The
 selection probability of triangle i divided by its area is ``tri_light_pdf[i]`` (0 for
 triangles that do not emit), which turns a BSDF-sampled hit into a light pdf for MIS.
 Probabilities are differences of the float32 CDF, so the pmf used in MIS is exactly the one
@@ -12,6 +13,7 @@ import math
 
 from .constants import HALF, ONE, ZERO
 from .device import device
+from .layout import TRI_E1, TRI_E2, TRI_V0
 from .vec import cross, dot, length, load3, madd, scale, sub
 from .warps import square_to_triangle
 
@@ -34,9 +36,9 @@ def sample_discrete(cdf, u):
 def sample_triangle_point(tri_v, i, u1, u2):
     """Uniform point on triangle i, with its unit geometric normal and area."""
     b1, b2 = square_to_triangle(u1, u2)
-    v0 = load3(tri_v, i, 0)
-    e1 = load3(tri_v, i, 3)
-    e2 = load3(tri_v, i, 6)
+    v0 = load3(tri_v, i, TRI_V0)
+    e1 = load3(tri_v, i, TRI_E1)
+    e2 = load3(tri_v, i, TRI_E2)
     q = madd(madd(v0, e1, b1), e2, b2)
     n = cross(e1, e2)
     len_n = length(n)

@@ -1,10 +1,7 @@
-"""Materials: the parameter table and the diffuse BSDF.
+"""The emission test and the diffuse (Lambertian) BSDF.
 
-``mat`` (float32, M x MAT_WIDTH) holds one row per material, see the ``M_*`` columns:
-albedo rgb, emitted radiance rgb, two-sided emission flag, type, then the principled
-parameters. ``eta`` = 0 means "derive the index from ``specular``" (F0 = 0.08 specular =
-((eta - 1) / (eta + 1))^2, Burley 2012). ``mat_tex`` (int32, M x N_SLOTS) names the texture
-that replaces a parameter (``T_*`` slots), or -1.
+Material rows (``mat``, with ``mat_tex`` naming the texture that replaces a parameter) are
+laid out in :mod:`.layout`; :mod:`.shading` reads them at a shading point.
 
 BSDFs are evaluated in the local shading frame (z = shading normal turned to the side of
 ``wo``, except for transmissive principled materials, whose frame keeps the geometric
@@ -14,42 +11,17 @@ or mapped normals cannot leak light through a surface.
 """
 from .constants import INV_PI, ZERO
 from .device import device
+from .layout import M_EMISSION, M_TWO_SIDED
 from .warps import square_to_cosine_hemisphere
-
-MAT_WIDTH = 20
-M_ALBEDO = 0
-M_EMISSION = 3
-M_TWO_SIDED = 6
-M_TYPE = 7
-M_ROUGHNESS = 8
-M_METALLIC = 9
-M_SPECULAR = 10
-M_ETA = 11
-M_SPEC_TINT = 12
-M_ANISOTROPIC = 13
-M_SHEEN = 14
-M_SHEEN_TINT = 15
-M_CLEARCOAT = 16
-M_CLEARCOAT_GLOSS = 17
-M_SUBSURFACE = 18
-M_TRANSMISSION = 19
-
-MAT_DIFFUSE = 0
-MAT_PRINCIPLED = 1
-
-# Texture slots (columns of mat_tex); scene/compile.py maps each to the column it replaces.
-N_SLOTS = 16
-T_ALBEDO, T_EMISSION, T_ROUGHNESS, T_METALLIC, T_SPECULAR, T_ETA, T_SPEC_TINT, \
-    T_ANISOTROPIC, T_SHEEN, T_SHEEN_TINT, T_CLEARCOAT, T_CLEARCOAT_GLOSS, T_SUBSURFACE, \
-    T_TRANSMISSION, T_NORMAL = range(15)
 
 
 @device
 def emits(mat, m, cos_out):
     """Does material m emit towards a direction at cosine cos_out with the front normal?
     (A textured emission keeps its scale in the emission columns.)"""
-    if mat[m, 3] > ZERO or mat[m, 4] > ZERO or mat[m, 5] > ZERO:
-        return cos_out > ZERO or mat[m, 6] > ZERO
+    if mat[m, M_EMISSION] > ZERO or mat[m, M_EMISSION + 1] > ZERO or \
+            mat[m, M_EMISSION + 2] > ZERO:
+        return cos_out > ZERO or mat[m, M_TWO_SIDED] > ZERO
     return False
 
 

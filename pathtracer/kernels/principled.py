@@ -8,7 +8,7 @@ naming: ``wo`` points to where the light goes (the viewer), ``wi`` to where it c
 (the sampled direction). Mitsuba calls these ``si.wi`` and ``wo``. ``eval`` returns the BSDF
 times |cos theta_i| (as Mitsuba's ``eval``), so ``weight = eval / pdf``.
 
-``p`` is the tuple of parameters (see :data:`P_FIELDS`), already read from the material
+``params`` is the tuple of parameters (the ``P_*`` fields of :mod:`.layout`), already read from the material
 (and its textures) at the shading point. ``eta`` is the interior/exterior index; the side
 of ``wo`` (wo.z > 0: outside) decides which way the interface is crossed.
 
@@ -31,6 +31,9 @@ import numpy as np
 
 from .constants import HALF, INV_PI, ONE, TWO, ZERO
 from .device import device
+from .layout import (P_ANISOTROPIC, P_BASE, P_CLEARCOAT, P_CLEARCOAT_GLOSS, P_ETA, P_FLATNESS,
+                     P_METALLIC, P_ROUGHNESS, P_SHEEN, P_SHEEN_TINT, P_SPEC_TINT,
+                     P_TRANSMISSION)
 from .vec import dot, normalize
 from .warps import square_to_cosine_hemisphere, square_to_disk_concentric
 
@@ -49,11 +52,6 @@ LUM_R = np.float32(0.212671)
 LUM_G = np.float32(0.715160)
 LUM_B = np.float32(0.072169)
 PI = np.float32(np.pi)
-
-# Parameter tuple layout.
-P_FIELDS = ("r", "g", "b", "roughness", "metallic", "eta", "spec_tint", "anisotropic",
-            "sheen", "sheen_tint", "clearcoat", "clearcoat_gloss", "flatness",
-            "transmission")
 
 
 @device
@@ -220,12 +218,22 @@ def lum(r, g, b):
 
 
 @device
-def principled_eval(p, wo, wi):
+def principled_eval(params, wo, wi):
     """(f(wo, wi) |cos theta_i| as rgb, pdf of principled_sample producing wi)."""
-    base_r, base_g, base_b = p[0], p[1], p[2]
-    roughness, metallic, eta = p[3], p[4], p[5]
-    spec_tint, anisotropic, sheen, sheen_tint = p[6], p[7], p[8], p[9]
-    clearcoat, cc_gloss, flatness, spec_trans = p[10], p[11], p[12], p[13]
+    base_r = params[P_BASE]
+    base_g = params[P_BASE + 1]
+    base_b = params[P_BASE + 2]
+    roughness = params[P_ROUGHNESS]
+    metallic = params[P_METALLIC]
+    eta = params[P_ETA]
+    spec_tint = params[P_SPEC_TINT]
+    anisotropic = params[P_ANISOTROPIC]
+    sheen = params[P_SHEEN]
+    sheen_tint = params[P_SHEEN_TINT]
+    clearcoat = params[P_CLEARCOAT]
+    cc_gloss = params[P_CLEARCOAT_GLOSS]
+    flatness = params[P_FLATNESS]
+    spec_trans = params[P_TRANSMISSION]
     cos_o = wo[2]
     cos_i = wi[2]
     if cos_o == ZERO or cos_i == ZERO:
@@ -370,10 +378,15 @@ def reflect_about(w, m):
 
 
 @device
-def principled_sample(p, wo, u_lobe, u1, u2):
+def principled_sample(params, wo, u_lobe, u1, u2):
     """(wi, weight = eval / pdf, pdf); pdf = 0: no sample (absorbed)."""
-    roughness, metallic, eta = p[3], p[4], p[5]
-    anisotropic, clearcoat, cc_gloss, spec_trans = p[7], p[10], p[11], p[13]
+    roughness = params[P_ROUGHNESS]
+    metallic = params[P_METALLIC]
+    eta = params[P_ETA]
+    anisotropic = params[P_ANISOTROPIC]
+    clearcoat = params[P_CLEARCOAT]
+    cc_gloss = params[P_CLEARCOAT_GLOSS]
+    spec_trans = params[P_TRANSMISSION]
     cos_o = wo[2]
     zero3 = (ZERO, ZERO, ZERO)
     if cos_o == ZERO:
@@ -418,7 +431,7 @@ def principled_sample(p, wo, u_lobe, u1, u2):
     # under another lobe's density.
     if (wo[2] * wi[2] > ZERO) != reflected:
         return wi, zero3, ZERO
-    val, pdf = principled_eval(p, wo, wi)
+    val, pdf = principled_eval(params, wo, wi)
     if not (pdf > ZERO):
         return wi, zero3, ZERO
     inv = ONE / pdf

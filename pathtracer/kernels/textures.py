@@ -2,8 +2,8 @@
 
 All textures of a scene share one float32 texel array ``tex_data`` (T, 3), already decoded
 to linear values on load (exact piecewise sRGB, see ``scene.textures``). Texture k is
-described by ``tex_int[k]`` = (first texel, width, height, filter: 0 bilinear, 1 nearest)
-and ``tex_f[k]`` = (tile u, tile v, offset u, offset v, scale r, g, b). Texture coordinates
+described by ``tex_int[k]`` (first texel, width, height, filter) and ``tex_f[k]`` (tile,
+offset, scale): the texture section of :mod:`.layout`. Texture coordinates
 follow the OBJ convention (v = 0 at the bottom of the image); texel centres lie at
 ((i + 0.5) / W, (j + 0.5) / H), and coordinates wrap (repeat) in both directions.
 """
@@ -13,9 +13,8 @@ import numpy as np
 
 from .constants import HALF, ONE
 from .device import device
-
-FILTER_BILINEAR = 0
-FILTER_NEAREST = 1
+from .layout import (FILTER_NEAREST, TEX_FILTER, TEX_FIRST, TEX_HEIGHT, TEX_OFFSET, TEX_SCALE,
+                     TEX_TILE, TEX_WIDTH)
 
 
 @device
@@ -33,15 +32,15 @@ def texel(tex_data, base, width, i, j):
 @device
 def tex_lookup(tex_data, tex_int, tex_f, t, u, v):
     """Filtered, scaled rgb value of texture t at texture coordinates (u, v)."""
-    base = tex_int[t, 0]
-    w = tex_int[t, 1]
-    h = tex_int[t, 2]
-    uu = u * tex_f[t, 0] + tex_f[t, 2]
-    vv = v * tex_f[t, 1] + tex_f[t, 3]
+    base = tex_int[t, TEX_FIRST]
+    w = tex_int[t, TEX_WIDTH]
+    h = tex_int[t, TEX_HEIGHT]
+    uu = u * tex_f[t, TEX_TILE] + tex_f[t, TEX_OFFSET]
+    vv = v * tex_f[t, TEX_TILE + 1] + tex_f[t, TEX_OFFSET + 1]
     # (float32 sizes: int * float32 would promote to float64)
     x = uu * np.float32(w)
     y = (ONE - vv) * np.float32(h)           # image row 0 is the top
-    if tex_int[t, 3] == FILTER_NEAREST:
+    if tex_int[t, TEX_FILTER] == FILTER_NEAREST:
         r, g, b = texel(tex_data, base, w, wrap(int(math.floor(x)), w),
                         wrap(int(math.floor(y)), h))
     else:
@@ -66,4 +65,4 @@ def tex_lookup(tex_data, tex_int, tex_f, t, u, v):
         r = a[0] * w00 + b_[0] * w10 + c[0] * w01 + d[0] * w11
         g = a[1] * w00 + b_[1] * w10 + c[1] * w01 + d[1] * w11
         b = a[2] * w00 + b_[2] * w10 + c[2] * w01 + d[2] * w11
-    return r * tex_f[t, 4], g * tex_f[t, 5], b * tex_f[t, 6]
+    return r * tex_f[t, TEX_SCALE], g * tex_f[t, TEX_SCALE + 1], b * tex_f[t, TEX_SCALE + 2]

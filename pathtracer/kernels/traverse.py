@@ -1,13 +1,15 @@
 """BVH traversal over the flat node arrays built by :mod:`pathtracer.accel.bvh`.
 
 Node k stores both children's boxes (Aila & Laine 2009 layout, so one node visit tests two
-boxes): ``bvh_box[k, 0:6]`` and ``bvh_box[k, 6:12]`` (min xyz, max xyz) and
-``bvh_child[k] = (c0, n0, c1, n1)``: a child with count n > 0 is a leaf over triangles
-c .. c+n-1, with n == 0 an inner node with index c, and with n < 0 empty. Node 0 is the root.
+boxes) and their (index, count) pairs, see the BVH section of :mod:`.layout`: a child with
+count n > 0 is a leaf over triangles c .. c+n-1, with n == 0 an inner node with index c, and
+with n < 0 empty. Node 0 is the root.
 """
 from .constants import INF, SLAB_SCALE, ZERO
 from .device import device
 from .intersect import ray_box, ray_triangle, safe_inverse
+from .layout import (BOX_CHILD0, BOX_CHILD1, BOX_STRIDE, CHILD0_COUNT, CHILD0_INDEX,
+                     CHILD1_COUNT, CHILD1_INDEX, CHILD_COUNT, CHILD_INDEX, CHILD_STRIDE)
 
 
 @device
@@ -37,12 +39,12 @@ def closest_hit(o, d, t_max, skip, tri_v, bvh_box, bvh_child, stack):
     while sp > 0:
         sp -= 1
         node = stack[sp]
-        c0 = bvh_child[node, 0]
-        n0 = bvh_child[node, 1]
-        c1 = bvh_child[node, 2]
-        n1 = bvh_child[node, 3]
-        t0 = ray_box(o, inv_d, bvh_box, node, 0, t_best) if n0 >= 0 else INF
-        t1 = ray_box(o, inv_d, bvh_box, node, 6, t_best) if n1 >= 0 else INF
+        c0 = bvh_child[node, CHILD0_INDEX]
+        n0 = bvh_child[node, CHILD0_COUNT]
+        c1 = bvh_child[node, CHILD1_INDEX]
+        n1 = bvh_child[node, CHILD1_COUNT]
+        t0 = ray_box(o, inv_d, bvh_box, node, BOX_CHILD0, t_best) if n0 >= 0 else INF
+        t1 = ray_box(o, inv_d, bvh_box, node, BOX_CHILD1, t_best) if n1 >= 0 else INF
         # Nearer child first: swap so that child 0 is the nearer one.
         if t1 < t0:
             c0, c1 = c1, c0
@@ -79,9 +81,10 @@ def any_hit(o, d, t_max, skip_a, skip_b, tri_v, bvh_box, bvh_child, stack):
         sp -= 1
         node = stack[sp]
         for side in range(2):
-            c = bvh_child[node, 2 * side]
-            n = bvh_child[node, 2 * side + 1]
-            if n >= 0 and ray_box(o, inv_d, bvh_box, node, 6 * side, t_max) < INF:
+            c = bvh_child[node, CHILD_STRIDE * side + CHILD_INDEX]
+            n = bvh_child[node, CHILD_STRIDE * side + CHILD_COUNT]
+            if n >= 0 and ray_box(o, inv_d, bvh_box, node, BOX_CHILD0 + BOX_STRIDE * side,
+                                  t_max) < INF:
                 if n == 0:
                     stack[sp] = c
                     sp += 1

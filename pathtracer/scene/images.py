@@ -1,39 +1,17 @@
-"""Reading texture and environment images (imageio; Radiance .hdr through imagecodecs)."""
-import os
-
+"""Texture and environment images: read (through the film's one reader), checked, made RGB."""
 import numpy as np
 
+from ..film import read_pixels, srgb_to_linear
 from .errors import SceneError
 
-
-def srgb_to_linear(c):
-    """The exact piecewise sRGB decoding (IEC 61966-2-1), not a 2.2 power."""
-    c = np.asarray(c, np.float64)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+__all__ = ["read_image", "load_texture", "srgb_to_linear"]
 
 
 def read_image(path, where=None, scene_file=None):
-    """float64 (H, W, C) pixels and whether they are already linear floats (HDR)."""
-    ext = os.path.splitext(path)[1].lower()
+    """float64 (H, W, 3) pixels and whether they are already linear floats (HDR); any
+    failure is a SceneError naming the file and the scene key."""
     try:
-        if ext == ".hdr":
-            import imagecodecs
-            with open(path, "rb") as f:
-                data = f.read()
-            img = np.asarray(imagecodecs.rgbe_decode(data), np.float64)
-            is_float = True
-        else:
-            import imageio.v3 as iio
-            raw = iio.imread(path)
-            is_float = raw.dtype.kind == "f"
-            if raw.dtype.kind in "ui":
-                img = raw.astype(np.float64) / np.iinfo(raw.dtype).max
-            elif raw.dtype == bool:
-                img = raw.astype(np.float64)
-            else:
-                img = raw.astype(np.float64)
-    except SceneError:
-        raise
+        img, is_float = read_pixels(path)
     except Exception as e:
         raise SceneError(f"cannot read image {path}: {e}", scene_file or path,
                          where) from None

@@ -14,8 +14,8 @@ from typing import Optional
 
 import numpy as np
 
+from ..kernels.layout import MATERIAL_PARAMS, PARAM_BY_KEY
 from .errors import SceneError
-
 
 
 # ---------------------------------------------------------------------------------------
@@ -53,22 +53,20 @@ class TextureSpec:
     pointer: str = ""
 
 
-# principled number parameters: scene key -> (default, lo, hi)
-PRINCIPLED_NUMBERS = {
-    "roughness": (0.5, 0.0, 1.0), "metallic": (0.0, 0.0, 1.0), "specular": (0.5, 0.0, 1.0),
-    "specularTint": (0.0, 0.0, 1.0), "anisotropic": (0.0, 0.0, 1.0),
-    "sheen": (0.0, 0.0, 1.0), "sheenTint": (0.0, 0.0, 1.0), "clearcoat": (0.0, 0.0, 1.0),
-    "clearcoatGloss": (0.0, 0.0, 1.0), "subsurface": (0.0, 0.0, 1.0),
-    "transmission": (0.0, 0.0, 1.0), "eta": (None, 0.0, None),
-}
+# principled number parameters: scene key -> (default, lo, hi), from the one parameter
+# table (kernels.layout.MATERIAL_PARAMS); eta's lower bound is open (> 0)
+PRINCIPLED_NUMBERS = {p.key: (p.default, p.lo, p.hi) for p in MATERIAL_PARAMS
+                      if p.kind == "number"}
+ALBEDO_DEFAULT = (PARAM_BY_KEY["albedo"].default,) * 3
+EMISSION_DEFAULT = (PARAM_BY_KEY["emission"].default,) * 3
 
 
 @dataclass
 class Material:
     name: str
     type: str = "principled"
-    albedo: tuple = (0.5, 0.5, 0.5)
-    emission: tuple = (0.0, 0.0, 0.0)
+    albedo: tuple = ALBEDO_DEFAULT
+    emission: tuple = EMISSION_DEFAULT
     two_sided: bool = False
     pointer: str = ""
     numbers: dict = field(default_factory=dict)    # principled number parameters
@@ -428,8 +426,8 @@ def _material(n, base):
         raise n.error("give 'albedo' or 'baseColor', not both", "baseColor")
     m = Material(name=name, type=mtype, pointer=n.pointer)
     key = "albedo" if n.has("albedo") or not n.has("baseColor") else "baseColor"
-    m.albedo = _color_or_texture(n, key, (0.5, 0.5, 0.5), base, "sRGB", m, "albedo")
-    m.emission = _color_or_texture(n, "emission", (0.0, 0.0, 0.0), base, "sRGB", m,
+    m.albedo = _color_or_texture(n, key, ALBEDO_DEFAULT, base, "sRGB", m, "albedo")
+    m.emission = _color_or_texture(n, "emission", EMISSION_DEFAULT, base, "sRGB", m,
                                    "emission")
     m.two_sided = n.boolean("twoSided", False)
     if mtype == "principled":

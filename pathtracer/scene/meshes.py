@@ -32,7 +32,7 @@ class ObjMesh:
 
 
 def cache_dir():
-    from .._jitcache import cache_root
+    from .._cache import cache_root
     return os.path.join(cache_root(), "meshes")
 
 

@@ -1,4 +1,6 @@
-"""Where compiled kernels are cached, and why the folder is keyed by our source hash.
+"""pt-render's disk cache: compiled kernels (``numba/``) and parsed meshes (``meshes/``).
+
+Why the kernel folder is keyed by our source hash:
 
 Numba's ``cache=True`` re-validates a cached function only against its *own* source file;
 a change in a device function it calls (another module) is not seen, and the stale binary
@@ -36,6 +38,7 @@ def cache_root():
 
 
 def configure():
+    """Point Numba's cache at this version's kernel folder (unless NUMBA_CACHE_DIR is set)."""
     if os.environ.get("NUMBA_CACHE_DIR"):
         return
     numba.config.CACHE_DIR = os.path.join(cache_root(), "numba", source_hash())

@@ -1,4 +1,5 @@
-"""Scene descriptions translated to Mitsuba 3 scene dictionaries, for the peer measurements.
+"""Scene descriptions translated to Mitsuba 3 scene dictionaries (``mitsuba.load_dict``): the
+peer renderer of the benchmarks and of the agreement tests.
 
 Only what both renderers express the same way is translated: a pinhole camera with lookAt,
 OBJ meshes with a transform, diffuse and principled materials without textures, and a
@@ -7,12 +8,10 @@ Mitsuba out of that scene.
 """
 import numpy as np
 
-# scene-format principled parameter -> Mitsuba `principled` parameter
-MITSUBA_NAMES = {"albedo": "base_color", "roughness": "roughness", "metallic": "metallic",
-                 "specular": "specular", "specularTint": "spec_tint",
-                 "anisotropic": "anisotropic", "sheen": "sheen", "sheenTint": "sheen_tint",
-                 "clearcoat": "clearcoat", "clearcoatGloss": "clearcoat_gloss",
-                 "subsurface": "flatness", "transmission": "spec_trans", "eta": "eta"}
+from .kernels.layout import MATERIAL_PARAMS
+
+# scene-format principled parameter -> Mitsuba `principled` parameter (the parameter table)
+MITSUBA_NAMES = {p.key: p.mitsuba for p in MATERIAL_PARAMS if p.mitsuba}
 
 
 class NotExpressible(ValueError):

@@ -1,0 +1,195 @@
+"""A/B comparison of two source trees of pt-render on the same machine, in one run.
+
+Used before and after a change of the kernels (a refactor must not cost speed nor change a
+bit of the image): each tree's ``pathtracer`` is imported in its own worker process, so both
+are measured by the same benchmark code on the same scene descriptions (this tree's
+``bench.scenes``).
+
+    python -m bench.ab throughput --trees OLD NEW [--backend cpu|cuda] [--scenes ...]
+    python -m bench.ab images --trees OLD NEW [--spp 4] [--resolution 96x72]
+
+``throughput``: camera paths/s per scene, the median of ``--repeats`` passes after a warm-up
+pass, compile excluded; trees alternate for ``--rounds`` rounds (drift on a shared machine
+hits both) and each tree's figure is the median over its rounds. ``images``: every scene of
+``scenes/`` and of the error-against-time study rendered on the CPU with each tree; the
+float32 pixel sums are compared bit for bit.
+"""
+import argparse
+import glob
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+
+# scene -> (resolution, spp per pass) for throughput, per backend
+THROUGHPUT = {
+    "cpu": {"cornell-box": ((256, 256), 4), "bunny-studio": ((256, 192), 4),
+            "sun": ((256, 192), 4)},
+    "cuda": {"cornell-box": ((1024, 1024), 64), "bunny-studio": ((1024, 768), 16),
+             "sun": ((1024, 768), 16)},
+}
+
+
+def _describe(name, resolution):
+    """A SceneDescription: a study scene of bench.scenes, or a file of scenes/."""
+    from bench.scenes import CONVERGENCE, describe
+    if name in CONVERGENCE:
+        source, _ = CONVERGENCE[name]
+        if callable(source):
+            desc = describe(source(resolution))
+        else:
+            from pathtracer.scene import load_scene_description
+            desc = load_scene_description(source)
+    else:
+        from pathtracer.scene import load_scene_description
+        desc = load_scene_description(os.path.join(ROOT, "scenes", name + ".json"))
+    desc.camera.resolution = tuple(resolution)
+    return desc
+
+
+def worker(args):
+    """Runs with the tree under test first on sys.path (bench.* is imported before it)."""
+    import bench.scenes  # noqa: F401  (this tree's scene descriptions, imported first)
+    sys.path.insert(0, os.path.abspath(args.tree))
+    import pathtracer
+    from pathtracer.backends import make_backend
+    from pathtracer.scene import compile_scene
+    assert os.path.abspath(pathtracer.__file__).startswith(os.path.abspath(args.tree))
+    res = tuple(int(x) for x in args.resolution.split("x"))
+    scene = compile_scene(_describe(args.scene, res))
+    backend = make_backend(args.backend, scene)
+    t0 = time.perf_counter()
+    backend.compile()
+    compile_s = time.perf_counter() - t0
+    mb, rr = scene.max_bounces, scene.rr_depth
+    out = {"tree": args.tree, "scene": args.scene, "backend": args.backend,
+           "resolution": res, "spp": args.spp, "compile_s": compile_s}
+    if args.mode == "image":
+        img, _ = backend.render_pass(0, args.spp, 7, mb, rr)
+        np.save(args.save, np.array(img, np.float32))
+        print(json.dumps(out))
+        return
+    start = [0]
+
+    def one_pass():
+        if args.backend == "cuda":
+            from numba import cuda
+            backend.launch(start[0], args.spp, 0, mb, rr)
+            cuda.synchronize()
+        else:
+            backend.render_pass(start[0], args.spp, 0, mb, rr)
+        start[0] += args.spp
+
+    one_pass()
+    times = []
+    for _ in range(args.repeats):
+        t = time.perf_counter()
+        one_pass()
+        times.append(time.perf_counter() - t)
+    t = statistics.median(times)
+    out.update(pass_s=times, paths_per_s=res[0] * res[1] * args.spp / t)
+    print(json.dumps(out))
+
+
+def _run_worker(tree, scene, backend, resolution, spp, mode, repeats=0, save=None):
+    cmd = [sys.executable, "-m", "bench.ab", "_worker", "--tree", tree, "--scene", scene,
+           "--backend", backend, "--resolution", "%dx%d" % tuple(resolution), "--spp",
+           str(spp), "--mode", mode, "--repeats", str(repeats)]
+    if save:
+        cmd += ["--save", save]
+    p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
+    if p.returncode != 0:
+        sys.stderr.write(p.stderr)
+        raise SystemExit(f"bench.ab: worker failed: {' '.join(cmd)}")
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def throughput(args):
+    from bench.common import command, machine, now, versions
+    table = THROUGHPUT[args.backend]
+    scenes = args.scenes or list(table)
+    record = {"command": command(), "machine": machine(), "date": now(),
+              "versions": versions(), "backend": args.backend, "trees": args.trees,
+              "results": []}
+    for name in scenes:
+        res, spp = table[name]
+        per_tree = {t: [] for t in args.trees}
+        for r in range(args.rounds):
+            order = args.trees if r % 2 == 0 else args.trees[::-1]
+            for tree in order:
+                got = _run_worker(tree, name, args.backend, res, spp, "time", args.repeats)
+                per_tree[tree].append(got["paths_per_s"])
+                record["results"].append(got)
+        medians = {t: statistics.median(v) for t, v in per_tree.items()}
+        a, b = (medians[t] for t in args.trees)
+        print(f"{name:14s} {args.backend:5s} " + "  ".join(
+            f"{t}: {medians[t] / 1e6:8.3f} M paths/s" for t in args.trees) +
+            f"   ratio {b / a:.3f}", flush=True)
+        record.setdefault("summary", {})[name] = {"paths_per_s": medians, "ratio": b / a}
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(record, f, indent=1)
+
+
+def images(args):
+    names = sorted(os.path.splitext(os.path.basename(p))[0]
+                   for p in glob.glob(os.path.join(ROOT, "scenes", "*.json")))
+    names += ["bunny-studio", "sun"]
+    names = args.scenes or names
+    res = tuple(int(x) for x in args.resolution.split("x"))
+    out = args.out
+    os.makedirs(out, exist_ok=True)
+    failures = 0
+    for name in names:
+        imgs = []
+        for k, tree in enumerate(args.trees):
+            path = os.path.join(out, f"{name}-{k}.npy")
+            if not (k == 0 and args.reuse and os.path.exists(path)):
+                _run_worker(tree, name, "cpu", res, args.spp, "image", save=path)
+            imgs.append(np.load(path))
+        a, b = imgs
+        same = a.shape == b.shape and np.array_equal(a.view(np.uint32), b.view(np.uint32))
+        diff = float(np.max(np.abs(a - b))) if a.shape == b.shape else float("nan")
+        failures += not same
+        print(f"{name:18s} {'bit-identical' if same else 'DIFFERENT'}  max |diff| {diff:.3g}"
+              f"  mean {float(a.mean()):.6g}", flush=True)
+    if failures:
+        raise SystemExit(f"bench.ab: {failures} scene(s) differ")
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(prog="python -m bench.ab", description=__doc__.split("\n")[0])
+    sub = p.add_subparsers(dest="cmd", required=True)
+    t = sub.add_parser("throughput")
+    t.add_argument("--trees", nargs=2, required=True)
+    t.add_argument("--backend", choices=("cpu", "cuda"), default="cpu")
+    t.add_argument("--scenes", nargs="*")
+    t.add_argument("--repeats", type=int, default=5)
+    t.add_argument("--rounds", type=int, default=2)
+    t.add_argument("--json")
+    i = sub.add_parser("images")
+    i.add_argument("--trees", nargs=2, required=True)
+    i.add_argument("--scenes", nargs="*")
+    i.add_argument("--spp", type=int, default=4)
+    i.add_argument("--resolution", default="96x72")
+    i.add_argument("--out", default=os.path.join(ROOT, "bench", "out", "ab-images"))
+    i.add_argument("--reuse", action="store_true",
+                   help="reuse the first tree's images saved by an earlier run in --out")
+    w = sub.add_parser("_worker")
+    for k in ("--tree", "--scene", "--backend", "--resolution", "--mode", "--save"):
+        w.add_argument(k)
+    w.add_argument("--spp", type=int)
+    w.add_argument("--repeats", type=int, default=5)
+    args = p.parse_args(argv)
+    {"throughput": throughput, "images": images, "_worker": worker}[args.cmd](args)
+
+
+if __name__ == "__main__":
+    main()

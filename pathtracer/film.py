@@ -1,0 +1,168 @@
+"""The film: accumulation of passes, tone mapping to display values, image files, metrics.
+
+Codecs come from libraries: imageio (PNG, JPG, BMP, TGA, TIFF), imagecodecs (Radiance RGBE
+``.hdr``), OpenEXR (``.exr``); NumPy's ``.npy`` keeps float32 exactly. Outputs are written
+atomically (a reader sees the old file or the new one, never half of one).
+"""
+import io
+import os
+import tempfile
+from dataclasses import dataclass
+
+import numpy as np
+
+from .kernels.layout import STAT_BOUNCE_RAYS, STAT_NONFINITE, STAT_SHADOW_RAYS, STATS_WIDTH
+
+FLOAT_FORMATS = (".hdr", ".exr", ".npy")
+ALL_FORMATS = (".png",) + FLOAT_FORMATS
+
+
+# ---------------------------------------------------------------------------------------
+# Accumulation
+
+@dataclass
+class Film:
+    """Sums of samples (float64) and ray statistics over the passes of a render."""
+    height: int
+    width: int
+    sum: np.ndarray = None
+    spp: int = 0
+    bounce_rays: int = 0
+    shadow_rays: int = 0
+    nonfinite: int = 0
+
+    def __post_init__(self):
+        self.sum = np.zeros((self.height, self.width, 3), np.float64)
+
+    def add(self, pass_sum, stats, n_samples):
+        """Add one pass: float32 pixel sums over n_samples paths and its stats (layout
+        STAT_*)."""
+        self.sum += pass_sum
+        self.spp += n_samples
+        totals = stats.reshape(-1, STATS_WIDTH).sum(axis=0, dtype=np.int64)
+        self.bounce_rays += int(totals[STAT_BOUNCE_RAYS])
+        self.shadow_rays += int(totals[STAT_SHADOW_RAYS])
+        self.nonfinite += int(totals[STAT_NONFINITE])
+
+    def image(self):
+        """The mean of the samples: linear radiance, float32 H x W x 3."""
+        return (self.sum / max(self.spp, 1)).astype(np.float32)
+
+    @property
+    def camera_rays(self):
+        return self.spp * self.width * self.height
+
+
+# ---------------------------------------------------------------------------------------
+# Transfer functions and tone mapping
+
+def srgb_to_linear(c):
+    """The exact piecewise sRGB decoding (IEC 61966-2-1), not a 2.2 power."""
+    c = np.asarray(c, np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(x):
+    """The exact piecewise sRGB encoding (IEC 61966-2-1), x clamped to [0, 1]."""
+    x = np.clip(np.nan_to_num(x, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def to_display(image):
+    """8-bit sRGB display values of linear radiance (clamped to [0, 1]: no tone curve)."""
+    return np.round(linear_to_srgb(image) * 255.0).astype(np.uint8)
+
+
+# ---------------------------------------------------------------------------------------
+# Files
+
+def encode(image, ext):
+    """Bytes of ``image`` (float HxWx3, linear RGB) in the format of extension ``ext``."""
+    ext = ext.lower()
+    if ext == ".png":
+        import imageio.v3 as iio
+        return iio.imwrite("<bytes>", to_display(image), extension=".png")
+    if ext == ".hdr":
+        import imagecodecs
+        return imagecodecs.rgbe_encode(np.ascontiguousarray(image, np.float32))
+    if ext == ".exr":
+        import OpenEXR
+        with tempfile.NamedTemporaryFile(suffix=".exr") as f:
+            channels = {"RGB": np.ascontiguousarray(image, np.float32)}
+            OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION,
+                          "type": OpenEXR.scanlineimage}, channels).write(f.name)
+            return open(f.name, "rb").read()
+    if ext == ".npy":
+        buf = io.BytesIO()
+        np.save(buf, np.asarray(image, np.float32))
+        return buf.getvalue()
+    raise ValueError(f"unsupported image format {ext!r} (use one of {', '.join(ALL_FORMATS)})")
+
+
+def write_image(path, image):
+    """Write atomically: a reader sees the old file or the new one, never half of one."""
+    data = encode(image, os.path.splitext(path)[1])
+    folder = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tmp-", suffix=os.path.splitext(path)[1])
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        # mkstemp makes the file private (0600); give it the permissions of a normal file.
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def read_pixels(path):
+    """(pixels, is_float) of an image file: float64 H x W x C, scaled to [0, 1] for
+    integer formats (not decoded: sRGB stays sRGB), and whether the file holds floats.
+    The one image reader, for textures, environment maps and reference images."""
+    ext = os.path.splitext(path)[1].lower()
+    if ext == ".npy":
+        return np.asarray(np.load(path), np.float64), True
+    if ext == ".hdr":
+        import imagecodecs
+        with open(path, "rb") as f:
+            return np.asarray(imagecodecs.rgbe_decode(f.read()), np.float64), True
+    if ext == ".exr":
+        import OpenEXR
+        with OpenEXR.File(path) as f:
+            ch = f.channels()
+            img = ch["RGB"].pixels if "RGB" in ch else np.stack(
+                [ch[c].pixels for c in "RGB"], axis=-1)
+        return np.asarray(img, np.float64), True
+    import imageio.v3 as iio
+    raw = iio.imread(path)
+    if raw.dtype.kind in "ui":
+        return raw.astype(np.float64) / np.iinfo(raw.dtype).max, False
+    return raw.astype(np.float64), raw.dtype.kind == "f"
+
+
+def read_image(path):
+    """Float linear RGB (HxWx3, float32) of an output or reference image: .npy, .hdr,
+    .exr, or an 8-bit sRGB .png (decoded)."""
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in ALL_FORMATS:
+        raise ValueError(f"unsupported image format {ext!r}")
+    img, is_float = read_pixels(path)
+    if not is_float:
+        img = srgb_to_linear(img)
+    img = np.asarray(img, np.float32)
+    if img.ndim != 3 or img.shape[2] < 3:
+        raise ValueError(f"expected an RGB image, got shape {img.shape}")
+    return img[..., :3]
+
+
+# ---------------------------------------------------------------------------------------
+# Metrics
+
+def relmse(image, reference, eps=0.01):
+    """Relative MSE: mean over pixels and channels of (x - ref)^2 / (ref^2 + eps)."""
+    x = np.asarray(image, np.float64)
+    r = np.asarray(reference, np.float64)
+    return float(np.mean((x - r) ** 2 / (r * r + eps)))

@@ -1,0 +1,156 @@
+"""Emitters: sampling a direction towards one (next-event estimation) and the light pdf of
+an emitter that a BSDF-sampled ray reached (for multiple importance sampling).
+
+Every light kind (HDRI environment, emissive triangle, point light) is sampled through one
+function, :func:`sample_emitter` of ``make_emitters(features)``, that returns the same
+record, as Mitsuba 3's ``Emitter::sample_direction`` and pbrt-v4's ``SampleLd`` do:
+
+    (wi, t_max, radiance, pdf_light, is_delta, light_tri)
+
+``wi`` the unit direction from the shading point, ``t_max`` how far a shadow ray must be
+clear (INF for the environment), ``radiance`` the emitted radiance (or, for a point light,
+intensity) arriving along ``wi``, ``pdf_light`` the solid-angle density of ``wi``, selection
+included (for a point light the pmf times distance squared: radiance / pdf_light is the
+irradiance term), ``is_delta`` whether MIS against BSDF sampling is impossible (point
+lights) and ``light_tri`` the light's triangle, which the shadow ray must not hit (-1 when
+none). ``pdf_light`` = 0 means no sample.
+"""
+import functools
+from typing import NamedTuple
+
+from .constants import INF, ONE, ONE_MINUS_EPS, SHADOW_SHORTEN, ZERO
+from .device import device
+from .envmap import env_eval, env_pdf, env_sample
+from .layout import ENV_P_SELECT, PL_INTENSITY, PL_POSITION, point_light_index, specialise
+from .lights import direction_to, sample_discrete, sample_triangle_point
+from .materials import emits
+from .surface import make_surface
+from .vec import dot, load3
+from .warps import power_heuristic, square_to_triangle
+
+NO_RADIANCE = (ZERO, ZERO, ZERO)
+
+
+@device
+def mis_weight_hit(pdf_prev, pdf_light):
+    """Weight of emission reached by a ray that BSDF sampling made with density pdf_prev
+    against light sampling's pdf_light (power heuristic, Veach 1997); 1 for camera rays
+    (pdf_prev = 0: emission seen directly has no other strategy)."""
+    if pdf_prev > ZERO:
+        return power_heuristic(pdf_prev, pdf_light)
+    return ONE
+
+
+class EmitterSteps(NamedTuple):
+    sample_emitter: object
+    hit_emission: object
+    escaped: object
+
+
+@functools.lru_cache(maxsize=None)
+def make_emitters(features):
+    """The emitter steps for scenes with ``features``."""
+    S = specialise(features)
+    TRI_LIGHTS = S.tri_lights
+    POINT_LIGHTS = S.point_lights
+    ANY_LIGHTS = S.any_lights
+    ENV_MAP = S.env_map
+    ENVIRONMENT = S.environment
+    TEXTURES = S.textures
+    surface = make_surface(features)
+    tri_uv_at = surface.tri_uv_at
+    emitted = surface.emitted
+
+    @device
+    def sample_environment(env_img, env_marg, env_cond, env_pdf_arr, env_info, u1, u2):
+        wi, pdf_dir = env_sample(env_marg, env_cond, env_pdf_arr, env_info, u1, u2)
+        if not (pdf_dir > ZERO):
+            return wi, INF, NO_RADIANCE, ZERO, False, -1
+        return (wi, INF, env_eval(env_img, env_info, wi), env_info[ENV_P_SELECT] * pdf_dir,
+                False, -1)
+
+    @device
+    def sample_triangle_light(tri_v, tri_mat, tri_uv, tri_light_pdf, mat, mat_tex, tex_data,
+                              tex_int, tex_f, ref, p, u1, u2):
+        q, nl, _ = sample_triangle_point(tri_v, ref, u1, u2)
+        wi, dist = direction_to(p, q)
+        cos_l = -dot(nl, wi)
+        lm = tri_mat[ref]
+        # tri_light_pdf = selection pmf / area: the same density hit_emission uses (0 for
+        # zero-area triangles)
+        pdf_area = tri_light_pdf[ref]
+        if not (dist > ZERO and pdf_area > ZERO and emits(mat, lm, cos_l)):
+            return wi, ZERO, NO_RADIANCE, ZERO, False, -1
+        lu, lv = ZERO, ZERO
+        if TEXTURES:
+            # texture coordinates of the sampled point, from the sampler's barycentrics
+            lb1, lb2 = square_to_triangle(u1, u2)
+            lu, lv = tri_uv_at(tri_uv, ref, lb1, lb2)
+        return (wi, dist * SHADOW_SHORTEN, emitted(mat, mat_tex, tex_data, tex_int, tex_f, lm,
+                                                   lu, lv),
+                pdf_area * dist * dist / abs(cos_l), False, ref)
+
+    @device
+    def sample_point_light(point_lights, pmf, ref, p):
+        pl = point_light_index(ref)
+        wi, dist = direction_to(p, load3(point_lights, pl, PL_POSITION))
+        if not (dist > ZERO):
+            return wi, ZERO, NO_RADIANCE, ZERO, True, -1
+        # a delta light: radiance / pdf_light = intensity / (pmf * dist^2)
+        return (wi, dist * SHADOW_SHORTEN, load3(point_lights, pl, PL_INTENSITY),
+                pmf * dist * dist, True, -1)
+
+    @device
+    def sample_emitter(scene, p, u_sel, u1, u2):
+        """One emitter sample seen from p (see the module's docstring): the environment
+        with probability env_info[ENV_P_SELECT], otherwise one light chosen in proportion
+        to its power."""
+        if ENV_MAP:
+            p_env = scene.env_info[ENV_P_SELECT]
+            if u_sel < p_env:
+                return sample_environment(scene.env_img, scene.env_marg, scene.env_cond,
+                                          scene.env_pdf, scene.env_info, u1, u2)
+            u_sel = min((u_sel - p_env) / (ONE - p_env), ONE_MINUS_EPS)
+        if ANY_LIGHTS:
+            k = sample_discrete(scene.light_cdf, u_sel)
+            ref = scene.light_ref[k]
+            if TRI_LIGHTS:
+                if ref >= 0:
+                    return sample_triangle_light(
+                        scene.tri_v, scene.tri_mat, scene.tri_uv, scene.tri_light_pdf,
+                        scene.mat, scene.mat_tex, scene.tex_data, scene.tex_int, scene.tex_f,
+                        ref, p, u1, u2)
+            if POINT_LIGHTS:
+                pmf = scene.light_cdf[k + 1] - scene.light_cdf[k]
+                if ENV_MAP:
+                    pmf *= ONE - scene.env_info[ENV_P_SELECT]
+                return sample_point_light(scene.point_lights, pmf, ref, p)
+        return (ZERO, ZERO, ONE), ZERO, NO_RADIANCE, ZERO, False, -1
+
+    @device
+    def hit_emission(mat, mat_tex, tex_data, tex_int, tex_f, tri_light_pdf, tri, m, cos_o, t,
+                     pdf_prev, u, v):
+        """(emitted radiance, MIS weight, emits) of triangle tri (material m) reached at
+        distance t, seen at cosine cos_o with its front normal."""
+        if not emits(mat, m, cos_o):
+            return NO_RADIANCE, ZERO, False
+        pdf_light = ZERO
+        if pdf_prev > ZERO:
+            pdf_light = tri_light_pdf[tri] * t * t / abs(cos_o)
+        return (emitted(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v),
+                mis_weight_hit(pdf_prev, pdf_light), True)
+
+    @device
+    def escaped(env, env_img, env_pdf_arr, env_info, d, pdf_prev):
+        """(radiance, MIS weight) of the environment seen by a ray leaving the scene along
+        d. A constant environment is not sampled by next-event estimation: weight 1."""
+        if ENV_MAP:
+            pdf_light = ZERO
+            if pdf_prev > ZERO:
+                pdf_light = env_info[ENV_P_SELECT] * env_pdf(env_pdf_arr, env_info, d)
+            return env_eval(env_img, env_info, d), mis_weight_hit(pdf_prev, pdf_light)
+        if ENVIRONMENT:
+            return (env[0], env[1], env[2]), ONE
+        return NO_RADIANCE, ZERO
+
+    return EmitterSteps(sample_emitter, hit_emission, escaped)

@@ -1,0 +1,318 @@
+"""The data contract between the scene compiler and the kernels: every column and slot of the
+flat arrays, by name.
+
+The scene compiler writes these arrays and the kernels read them; both, the Mitsuba
+translator and the tests use the names below, never bare numbers (``tests/test_layout.py``
+checks that no other module indexes these arrays with an integer literal). A column that
+starts a vector names its first element: ``cam[CAM_FORWARD + 2]`` is the forward vector's z.
+
+:data:`MATERIAL_PARAMS` is the one table of material parameters: scene-format key, default,
+range, the column of ``mat`` it fills, the texture slot that may replace it, and its place in
+the principled parameter tuple. The loader validates with it, the compiler fills ``mat``
+with it, and a test checks it against ``docs/scene-format.md``.
+"""
+from typing import NamedTuple
+
+import numpy as np
+
+from .device import device
+
+
+# ---- Camera: cam, float32 (CAM_SIZE,) -------------------------------------------------------
+CAM_ORIGIN = 0        # eye point xyz
+CAM_FORWARD = 3       # unit view direction
+CAM_RIGHT = 6         # right, scaled by tan(fov_x / 2)
+CAM_UP = 9            # up, scaled by tan(fov_y / 2)
+CAM_LENS_X = 12       # thin lens: lens radius / tan(fov_x / 2)
+CAM_LENS_Y = 13       # thin lens: lens radius / tan(fov_y / 2)
+CAM_FOCUS = 14        # thin lens: distance of the plane in focus
+CAM_SIZE = 16
+
+# ---- Triangles: one row per triangle, in BVH leaf order --------------------------------------
+# tri_v, float32 (N, TRI_V_WIDTH): first vertex and the two edges from it (the intersection
+# test's form); the front side is the counter-clockwise one, cross(e1, e2).
+TRI_V0 = 0
+TRI_E1 = 3
+TRI_E2 = 6
+TRI_V_WIDTH = 9
+# tri_n, float32 (N, TRI_N_WIDTH): unit vertex normals (smooth shading only)
+TRI_N0 = 0
+TRI_N1 = 3
+TRI_N2 = 6
+TRI_N_WIDTH = 9
+# tri_uv, float32 (N, TRI_UV_WIDTH): texture coordinates (u, v) of the three vertices
+TRI_UV0 = 0
+TRI_UV1 = 2
+TRI_UV2 = 4
+TRI_UV_WIDTH = 6
+# tri_t, float32 (N, TRI_T_WIDTH): unit vertex tangents (dp/du), then the handedness sign of
+# the bitangent at each vertex (+1 or -1)
+TRI_T0 = 0
+TRI_T1 = 3
+TRI_T2 = 6
+TRI_T_SIGN = 9
+TRI_T_WIDTH = 12
+
+# ---- Materials: mat, float32 (M, MAT_WIDTH); mat_tex, int32 (M, N_SLOTS) ---------------------
+M_ALBEDO = 0          # rgb; for a textured albedo the texture's scale
+M_EMISSION = 3        # rgb; non-zero means "emits" (a textured emission keeps its scale here)
+M_TWO_SIDED = 6       # 1: emits on both sides
+M_TYPE = 7            # MAT_DIFFUSE or MAT_PRINCIPLED
+M_ROUGHNESS = 8
+M_METALLIC = 9
+M_SPECULAR = 10
+M_ETA = 11            # 0: derived from specular in the kernel
+M_SPEC_TINT = 12
+M_ANISOTROPIC = 13
+M_SHEEN = 14
+M_SHEEN_TINT = 15
+M_CLEARCOAT = 16
+M_CLEARCOAT_GLOSS = 17
+M_SUBSURFACE = 18
+M_TRANSMISSION = 19
+MAT_WIDTH = 20
+
+MAT_DIFFUSE = 0
+MAT_PRINCIPLED = 1
+
+# Texture slots: mat_tex[m, T_*] is the texture that replaces a parameter, or NO_TEXTURE.
+T_ALBEDO = 0
+T_EMISSION = 1
+T_ROUGHNESS = 2
+T_METALLIC = 3
+T_SPECULAR = 4
+T_ETA = 5
+T_SPEC_TINT = 6
+T_ANISOTROPIC = 7
+T_SHEEN = 8
+T_SHEEN_TINT = 9
+T_CLEARCOAT = 10
+T_CLEARCOAT_GLOSS = 11
+T_SUBSURFACE = 12
+T_TRANSMISSION = 13
+T_NORMAL = 14
+N_SLOTS = 16
+NO_TEXTURE = -1
+
+# ---- The principled parameter tuple (kernels.principled), read at a shading point ------------
+P_BASE = 0            # base colour rgb
+P_ROUGHNESS = 3
+P_METALLIC = 4
+P_ETA = 5
+P_SPEC_TINT = 6
+P_ANISOTROPIC = 7
+P_SHEEN = 8
+P_SHEEN_TINT = 9
+P_CLEARCOAT = 10
+P_CLEARCOAT_GLOSS = 11
+P_FLATNESS = 12       # the scene's "subsurface" (Mitsuba's name)
+P_TRANSMISSION = 13
+P_SIZE = 14
+# the fields' names, in tuple order (tests build parameter tuples by name)
+P_FIELDS = ("r", "g", "b", "roughness", "metallic", "eta", "spec_tint", "anisotropic",
+            "sheen", "sheen_tint", "clearcoat", "clearcoat_gloss", "flatness",
+            "transmission")
+
+
+class MaterialParam(NamedTuple):
+    """One material parameter of the scene format."""
+    key: str              # the scene file's key
+    kind: str             # "color" (rgb) or "number"
+    default: object       # the scene format's default; None: derived (eta from specular)
+    lo: object            # smallest allowed value (None: unbounded)
+    hi: object            # largest allowed value (None: unbounded)
+    column: int           # first column of mat
+    slot: int             # texture slot of mat_tex
+    field: int            # index in the principled parameter tuple (-1: not in it)
+    principled_only: bool
+    mitsuba: str          # Mitsuba 3's `principled` parameter ("": none)
+
+
+MATERIAL_PARAMS = (
+    MaterialParam("albedo", "color", 0.5, 0.0, None, M_ALBEDO, T_ALBEDO, P_BASE, False,
+                  "base_color"),
+    MaterialParam("emission", "color", 0.0, 0.0, None, M_EMISSION, T_EMISSION, -1, False,
+                  ""),
+    MaterialParam("roughness", "number", 0.5, 0.0, 1.0, M_ROUGHNESS, T_ROUGHNESS,
+                  P_ROUGHNESS, True, "roughness"),
+    MaterialParam("metallic", "number", 0.0, 0.0, 1.0, M_METALLIC, T_METALLIC, P_METALLIC,
+                  True, "metallic"),
+    MaterialParam("specular", "number", 0.5, 0.0, 1.0, M_SPECULAR, T_SPECULAR, -1, True,
+                  "specular"),
+    MaterialParam("specularTint", "number", 0.0, 0.0, 1.0, M_SPEC_TINT, T_SPEC_TINT,
+                  P_SPEC_TINT, True, "spec_tint"),
+    MaterialParam("anisotropic", "number", 0.0, 0.0, 1.0, M_ANISOTROPIC, T_ANISOTROPIC,
+                  P_ANISOTROPIC, True, "anisotropic"),
+    MaterialParam("sheen", "number", 0.0, 0.0, 1.0, M_SHEEN, T_SHEEN, P_SHEEN, True, "sheen"),
+    MaterialParam("sheenTint", "number", 0.0, 0.0, 1.0, M_SHEEN_TINT, T_SHEEN_TINT,
+                  P_SHEEN_TINT, True, "sheen_tint"),
+    MaterialParam("clearcoat", "number", 0.0, 0.0, 1.0, M_CLEARCOAT, T_CLEARCOAT,
+                  P_CLEARCOAT, True, "clearcoat"),
+    MaterialParam("clearcoatGloss", "number", 0.0, 0.0, 1.0, M_CLEARCOAT_GLOSS,
+                  T_CLEARCOAT_GLOSS, P_CLEARCOAT_GLOSS, True, "clearcoat_gloss"),
+    MaterialParam("subsurface", "number", 0.0, 0.0, 1.0, M_SUBSURFACE, T_SUBSURFACE,
+                  P_FLATNESS, True, "flatness"),
+    MaterialParam("transmission", "number", 0.0, 0.0, 1.0, M_TRANSMISSION, T_TRANSMISSION,
+                  P_TRANSMISSION, True, "spec_trans"),
+    # eta: > 0 (lower bound open); absent, it follows from specular (F0 = 0.08 specular)
+    MaterialParam("eta", "number", None, 0.0, None, M_ETA, T_ETA, P_ETA, True, "eta"),
+)
+PARAM_BY_KEY = {p.key: p for p in MATERIAL_PARAMS}
+# eta when neither eta nor specular is given: specular 0.5 -> F0 = 0.04 -> eta = 1.5
+DEFAULT_ETA = 1.5
+
+# ---- Lights ------------------------------------------------------------------------------------
+# point_lights, float32 (P, PL_WIDTH)
+PL_POSITION = 0
+PL_INTENSITY = 3
+PL_WIDTH = 6
+# light_ref[k]: triangle index of light k, or point_light_ref(p) for point light p
+# env_info, float32 (ENV_INFO_SIZE,)
+ENV_COS_ROT = 0       # cos and sin of the map's rotation about +Y
+ENV_SIN_ROT = 1
+ENV_P_SELECT = 2      # probability that next-event estimation picks the environment
+ENV_INFO_SIZE = 4
+
+# ---- Textures: tex_int, int32 (K, TEX_INT_WIDTH); tex_f, float32 (K, TEX_F_WIDTH) ------------
+TEX_FIRST = 0         # index of the first texel in tex_data
+TEX_WIDTH = 1
+TEX_HEIGHT = 2
+TEX_FILTER = 3        # FILTER_BILINEAR or FILTER_NEAREST
+TEX_INT_WIDTH = 4
+TEX_TILE = 0          # u, v
+TEX_OFFSET = 2        # u, v
+TEX_SCALE = 4         # r, g, b
+TEX_F_WIDTH = 7
+FILTER_BILINEAR = 0
+FILTER_NEAREST = 1
+
+# ---- BVH: node k holds both children (Aila & Laine 2009) ---------------------------------------
+# bvh_box, float32 (B, BOX_WIDTH): child c's box starts at BOX_CHILD0 + c * BOX_STRIDE and
+# holds min xyz (BOX_MIN), then max xyz (BOX_MAX)
+BOX_CHILD0 = 0
+BOX_CHILD1 = 6
+BOX_STRIDE = 6
+BOX_MIN = 0
+BOX_MAX = 3
+BOX_WIDTH = 12
+# bvh_child, int32 (B, CHILD_WIDTH): child c's (index, count) start at c * CHILD_STRIDE;
+# count > 0: a leaf over triangles index .. index + count - 1; 0: an inner node with that
+# index; CHILD_EMPTY: no child
+CHILD_INDEX = 0       # within a child's pair
+CHILD_COUNT = 1
+CHILD0_INDEX = 0
+CHILD0_COUNT = 1
+CHILD1_INDEX = 2
+CHILD1_COUNT = 3
+CHILD_STRIDE = 2
+CHILD_WIDTH = 4
+CHILD_EMPTY = -1
+
+# ---- Film statistics: stats, int32 (H, W, STATS_WIDTH) -----------------------------------------
+STAT_BOUNCE_RAYS = 0
+STAT_SHADOW_RAYS = 1
+STAT_NONFINITE = 2
+STATS_WIDTH = 3
+
+# ---- Random dimensions of a path (kernels.rng) -------------------------------------------------
+D_PIXEL_X = 0
+D_PIXEL_Y = 1
+D_LENS_U = 2
+D_LENS_V = 3
+D_FIRST_BOUNCE = 4    # then DIMS_PER_BOUNCE per scattering event:
+D_LIGHT_SELECT = 0
+D_LIGHT_U = 1
+D_LIGHT_V = 2
+D_BSDF_U = 3
+D_BSDF_V = 4
+D_RR = 5
+D_BSDF_LOBE = 6
+DIMS_PER_BOUNCE = 8
+
+
+class Features(NamedTuple):
+    """What a scene uses; each flag that is False removes code from the kernel."""
+    tri_lights: bool    # emissive triangles (area lights)
+    point_lights: bool
+    environment: bool   # constant-colour environment
+    smooth: bool        # interpolated vertex normals
+    principled: bool = False   # any principled material
+    textures: bool = False     # any texture (parameters or normal maps)
+    normal_map: bool = False   # any normal map
+    tangents: bool = False     # per-vertex tangents from texture coordinates
+    env_map: bool = False      # an HDRI environment (importance sampled)
+    thin_lens: bool = False    # aperture > 0
+
+
+class Specialisation(NamedTuple):
+    """Compile-time constants derived from :class:`Features`: the kernel factories close
+    over these, and Numba removes every branch on a constant that is False."""
+    tri_lights: bool
+    point_lights: bool
+    any_lights: bool       # emissive triangles or point lights
+    environment: bool      # constant-colour environment
+    env_map: bool
+    any_environment: bool  # either kind of environment: escaped rays see it
+    nee: bool              # any light to sample: next-event estimation
+    smooth: bool
+    principled: bool
+    textures: bool
+    normal_map: bool
+    tangents: bool
+    thin_lens: bool
+    fold: bool             # shading normals differ from geometric ones: fold lobes back
+    lean: bool             # Lambertian and flat shading only: the cheapest path
+
+
+def specialise(features):
+    """The :class:`Specialisation` of a feature set."""
+    f = Features(*(bool(x) for x in features))
+    any_lights = f.tri_lights or f.point_lights
+    normal_map = f.normal_map and f.textures
+    fold = f.smooth or normal_map
+    return Specialisation(
+        tri_lights=f.tri_lights, point_lights=f.point_lights, any_lights=any_lights,
+        environment=f.environment, env_map=f.env_map,
+        any_environment=f.environment or f.env_map, nee=any_lights or f.env_map,
+        smooth=f.smooth, principled=f.principled, textures=f.textures,
+        normal_map=normal_map, tangents=f.tangents, thin_lens=f.thin_lens, fold=fold,
+        lean=not f.principled and not fold)
+
+
+class SceneArrays(NamedTuple):
+    """Everything a kernel reads. Arrays a scene does not use hold one dummy row."""
+    cam: np.ndarray            # float32 (CAM_SIZE,)
+    tri_v: np.ndarray          # float32 (N, TRI_V_WIDTH)
+    tri_n: np.ndarray          # float32 (N, TRI_N_WIDTH) (smooth only)
+    tri_mat: np.ndarray        # int32 (N,)
+    mat: np.ndarray            # float32 (M, MAT_WIDTH)
+    tri_light_pdf: np.ndarray  # float32 (N,): selection probability / area; 0 if not emissive
+    light_cdf: np.ndarray      # float32 (K + 1,)
+    light_ref: np.ndarray      # int32 (K,): triangle index, or point_light_ref(p)
+    point_lights: np.ndarray   # float32 (P, PL_WIDTH)
+    env: np.ndarray            # float32 (3,): constant environment radiance
+    bvh_box: np.ndarray        # float32 (B, BOX_WIDTH)
+    bvh_child: np.ndarray      # int32 (B, CHILD_WIDTH)
+    tri_uv: np.ndarray         # float32 (N, TRI_UV_WIDTH) (textures only)
+    tri_t: np.ndarray          # float32 (N, TRI_T_WIDTH) (tangents only)
+    mat_tex: np.ndarray        # int32 (M, N_SLOTS)
+    tex_data: np.ndarray       # float32 (T, 3) linear texels of all textures
+    tex_int: np.ndarray        # int32 (K, TEX_INT_WIDTH)
+    tex_f: np.ndarray          # float32 (K, TEX_F_WIDTH)
+    env_img: np.ndarray        # float32 (H, W, 3) see kernels.envmap
+    env_marg: np.ndarray       # float32 (H + 1,)
+    env_cond: np.ndarray       # float32 (H, W + 1)
+    env_pdf: np.ndarray        # float32 (H, W)
+    env_info: np.ndarray       # float32 (ENV_INFO_SIZE,)
+
+
+@device
+def point_light_ref(p):
+    """light_ref entry of point light p (negative: triangles have indices >= 0)."""
+    return -(p + 1)
+
+
+@device
+def point_light_index(ref):
+    """The point light of a negative light_ref entry."""
+    return -ref - 1

@@ -1,0 +1,146 @@
+"""BSDFs in world space: evaluation and sampling in the shading frame, made consistent with
+the geometric surface.
+
+``make_scatter(features)`` returns the steps specialised for one feature set (see
+:mod:`.integrator`). The local BSDFs are :mod:`.materials` (Lambertian) and
+:mod:`.principled`.
+"""
+import functools
+from typing import NamedTuple
+
+from .constants import INV_PI, ONE, TWO, ZERO
+from .device import device
+from .layout import P_BASE, specialise
+from .materials import diffuse_eval_local, diffuse_sample_local
+from .principled import principled_eval, principled_sample
+from .surface import offset_origin
+from .vec import add, dot, madd, neg, scale, to_world
+
+
+@device
+def to_local(w, t, s, n):
+    return (dot(w, t), dot(w, s), dot(w, n))
+
+
+@device
+def base_color(params):
+    """The base colour (albedo) of a parameter tuple."""
+    return params[P_BASE], params[P_BASE + 1], params[P_BASE + 2]
+
+
+@device
+def consistent(wo, wo_l, w, w_l, ng):
+    """Do the shading frame and the geometric surface agree on whether w is a reflection
+    or a transmission of wo?"""
+    return (wo_l[2] * w_l[2] > ZERO) == (dot(ng, wo) * dot(ng, w) > ZERO)
+
+
+@device
+def mirror(w, ng):
+    """w mirrored across the plane with unit normal ng."""
+    return madd(w, ng, -TWO * dot(w, ng))
+
+
+class ScatterSteps(NamedTuple):
+    local_wo: object
+    eval_world: object
+    sample_world: object
+    leave: object
+
+
+@functools.lru_cache(maxsize=None)
+def make_scatter(features):
+    """The scattering steps for scenes with ``features``."""
+    S = specialise(features)
+    PRINCIPLED = S.principled
+    FOLD = S.fold
+    LEAN = S.lean
+
+    @device
+    def bsdf_eval(is_principled, params, wo_l, wi_l):
+        if PRINCIPLED:
+            if is_principled:
+                return principled_eval(params, wo_l, wi_l)
+        return diffuse_eval_local(base_color(params), wo_l, wi_l)
+
+    @device
+    def bsdf_sample(is_principled, params, wo_l, u_lobe, u1, u2):
+        if PRINCIPLED:
+            if is_principled:
+                return principled_sample(params, wo_l, u_lobe, u1, u2)
+        return diffuse_sample_local(base_color(params), wo_l, u1, u2)
+
+    @device
+    def local_wo(wo, t, s, n):
+        """wo in the shading frame (the Lambertian-only kernel needs only its side)."""
+        if LEAN:
+            return (ZERO, ZERO, ONE)
+        return to_local(wo, t, s, n)
+
+    @device
+    def eval_world(is_principled, params, wo, wo_l, wi, t, s, n, ng):
+        """BSDF * |cos| and pdf for world direction wi.
+
+        Where the shading normal differs from the geometric one, part of a lobe can point
+        to the wrong side of the surface (a reflection below it, or a refraction that stays
+        above). Counting it would leak light through the surface and dropping it would lose
+        energy (a white furnace would not render white), so that part is folded back:
+        mirrored across the geometric tangent plane. The effective BSDF at wi is the
+        original one at wi (if wi is on its proper side) plus the original one at the mirror
+        image of wi (if that one was on the wrong side); sampling applies the same mirror,
+        so eval, pdf and sample stay consistent."""
+        if LEAN:
+            # diffuse only, flat shading: n is ng turned to wo (bent only at grazing wo)
+            cos_i = dot(n, wi)
+            if cos_i <= ZERO or dot(ng, wi) <= ZERO:
+                return (ZERO, ZERO, ZERO), ZERO
+            k = cos_i * INV_PI
+            albedo = base_color(params)
+            return (albedo[0] * k, albedo[1] * k, albedo[2] * k), k
+        wi_l = to_local(wi, t, s, n)
+        f = (ZERO, ZERO, ZERO)
+        pdf = ZERO
+        if consistent(wo, wo_l, wi, wi_l, ng):
+            f, pdf = bsdf_eval(is_principled, params, wo_l, wi_l)
+        if FOLD:
+            wm = mirror(wi, ng)
+            wm_l = to_local(wm, t, s, n)
+            if not consistent(wo, wo_l, wm, wm_l, ng):
+                f2, pdf2 = bsdf_eval(is_principled, params, wo_l, wm_l)
+                f = add(f, f2)
+                pdf += pdf2
+        return f, pdf
+
+    @device
+    def sample_world(is_principled, params, wo, wo_l, t, s, n, ng, u_lobe, u1, u2):
+        """(wi, weight = f |cos| / pdf, pdf) of a sampled world direction; pdf = 0: the
+        path is absorbed. A direction on the wrong side of the geometric surface is folded
+        back (see eval_world), whose effective BSDF and pdf then give the weight."""
+        wi_l, weight, pdf_bsdf = bsdf_sample(is_principled, params, wo_l, u_lobe, u1, u2)
+        if not (pdf_bsdf > ZERO):
+            return wi_l, weight, ZERO
+        wi = to_world(wi_l, t, s, n)   # unit: orthonormal frame
+        if LEAN:
+            if dot(ng, wi) <= ZERO:
+                return wi, weight, ZERO
+        elif not consistent(wo, wo_l, wi, wi_l, ng):
+            if not FOLD:
+                return wi, weight, ZERO   # the shading frame and the surface disagree
+            wi = mirror(wi, ng)
+        if FOLD:
+            f, pdf_bsdf = eval_world(is_principled, params, wo, wo_l, wi, t, s, n, ng)
+            if not (pdf_bsdf > ZERO):
+                return wi, weight, ZERO
+            weight = scale(f, ONE / pdf_bsdf)
+        return wi, weight, pdf_bsdf
+
+    @device
+    def leave(p, ng, w, origin):
+        """Origin of a ray leaving p towards w: on w's side of the surface. Only
+        transmissive materials send rays to the other side of ng (turned to wo)."""
+        if PRINCIPLED:
+            if dot(ng, w) < ZERO:
+                return offset_origin(p, neg(ng))
+        return origin
+
+    return ScatterSteps(local_wo, eval_world, sample_world, leave)

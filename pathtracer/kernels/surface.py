@@ -1,0 +1,266 @@
+"""The surface at a hit: texture coordinates, material parameters, emission, the shading
+frame and where rays leave from.
+
+``make_surface(features)`` returns these steps specialised for one feature set (see
+:mod:`.integrator`); each takes only the arrays it reads.
+"""
+import functools
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from .constants import ONE, OFFSET_REL, TWO, ZERO
+from .device import device
+from .layout import (M_ALBEDO, M_ANISOTROPIC, M_CLEARCOAT, M_CLEARCOAT_GLOSS, M_EMISSION,
+                     M_ETA, M_METALLIC, M_ROUGHNESS, M_SHEEN, M_SHEEN_TINT, M_SPEC_TINT,
+                     M_SPECULAR, M_SUBSURFACE, M_TRANSMISSION, M_TYPE, MAT_PRINCIPLED,
+                     T_ALBEDO, T_ANISOTROPIC, T_CLEARCOAT, T_CLEARCOAT_GLOSS,
+                     T_EMISSION, T_ETA, T_METALLIC, T_NORMAL, T_ROUGHNESS, T_SHEEN,
+                     T_SHEEN_TINT, T_SPEC_TINT, T_SPECULAR, T_SUBSURFACE, T_TRANSMISSION,
+                     TRI_N0, TRI_N1, TRI_N2, TRI_T0, TRI_T1, TRI_T2, TRI_T_SIGN, TRI_UV0,
+                     TRI_UV1, TRI_UV2, specialise)
+from .principled import lum
+from .textures import tex_lookup
+from .vec import add, cross, dot, frame, load3, madd, max_abs, neg, normalize, scale
+
+ETA_MIN_TRANSMISSIVE = np.float32(1.001)   # eta = 1 is no interface (as Mitsuba)
+SPEC_K = np.float32(0.08)                  # F0 = SPEC_K * specular (Burley 2012)
+HORIZON_EPS = np.float32(1e-3)
+
+
+@device
+def offset_origin(p, n):
+    """p pushed along n by a few ulps of p's magnitude (scale invariant)."""
+    return madd(p, n, max_abs(p) * OFFSET_REL)
+
+
+@device
+def tangent_on(t, n):
+    """t made orthogonal to the unit normal n and normalised; any tangent if t is along n."""
+    t = madd(t, n, -dot(t, n))
+    if dot(t, t) > ZERO:
+        return normalize(t)
+    return frame(n)[0]
+
+
+@device
+def _lift_term(p, vk, nk, ng, bk):
+    if dot(nk, ng) < ZERO:
+        nk = neg(nk)
+    h = min(dot((p[0] - vk[0], p[1] - vk[1], p[2] - vk[2]), nk), ZERO)
+    return scale(nk, -bk * h)
+
+
+@device
+def terminator_lift(p, b1, b2, v0, e1, e2, n0, n1, n2, ng):
+    """Shadow terminator (Hanika 2021, "Hacking the Shadow Terminator", Ray Tracing Gems II
+    ch. 4): the point p of a smooth-shaded triangle lifted onto the curved surface its vertex
+    normals describe (the barycentric mean of p's projections onto the vertices' tangent
+    planes, only ever outwards, towards ng). Rays leaving on ng's side start there, so that a
+    coarse smooth mesh shadows itself less in flat facets."""
+    b0 = ONE - b1 - b2
+    lift = add(add(_lift_term(p, v0, n0, ng, b0), _lift_term(p, add(v0, e1), n1, ng, b1)),
+               _lift_term(p, add(v0, e2), n2, ng, b2))
+    return add(p, lift)
+
+
+@device
+def interpolate3(arr, tri, c0, c1, c2, b1, b2):
+    """Barycentric interpolation of the three vectors of row tri at columns c0, c1, c2."""
+    b0 = ONE - b1 - b2
+    return add(add(scale(load3(arr, tri, c0), b0), scale(load3(arr, tri, c1), b1)),
+               scale(load3(arr, tri, c2), b2))
+
+
+@device
+def unit(x):
+    return min(max(x, ZERO), ONE)
+
+
+class SurfaceSteps(NamedTuple):
+    tri_uv_at: object
+    material_at: object
+    emitted: object
+    shading_frame: object
+    ray_origin: object
+
+
+@functools.lru_cache(maxsize=None)
+def make_surface(features):
+    """The surface steps for scenes with ``features`` (branches on unused features removed
+    before compilation; conditions are constants alone, which is what Numba prunes)."""
+    S = specialise(features)
+    TEXTURES = S.textures
+    PRINCIPLED = S.principled
+    SMOOTH = S.smooth
+    TANGENTS = S.tangents
+    NORMAL_MAP = S.normal_map
+
+    @device
+    def param1(mat, mat_tex, tex_data, tex_int, tex_f, m, slot, col, u, v):
+        """A number parameter of material m, from its texture when it has one."""
+        if TEXTURES:
+            t = mat_tex[m, slot]
+            if t >= 0:
+                r, g, b = tex_lookup(tex_data, tex_int, tex_f, t, u, v)
+                return lum(r, g, b)
+        return mat[m, col]
+
+    @device
+    def param3(mat, mat_tex, tex_data, tex_int, tex_f, m, slot, col, u, v):
+        """A colour parameter of material m, from its texture when it has one."""
+        if TEXTURES:
+            t = mat_tex[m, slot]
+            if t >= 0:
+                return tex_lookup(tex_data, tex_int, tex_f, t, u, v)
+        return mat[m, col], mat[m, col + 1], mat[m, col + 2]
+
+    @device
+    def tri_uv_at(tri_uv, tri, b1, b2):
+        """Texture coordinates at barycentrics (b1, b2) of triangle tri."""
+        if TEXTURES:
+            b0 = ONE - b1 - b2
+            return (b0 * tri_uv[tri, TRI_UV0] + b1 * tri_uv[tri, TRI_UV1] +
+                    b2 * tri_uv[tri, TRI_UV2],
+                    b0 * tri_uv[tri, TRI_UV0 + 1] + b1 * tri_uv[tri, TRI_UV1 + 1] +
+                    b2 * tri_uv[tri, TRI_UV2 + 1])
+        return ZERO, ZERO
+
+    @device
+    def emitted(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v):
+        """Emitted radiance of material m at texture coordinates (u, v)."""
+        return param3(mat, mat_tex, tex_data, tex_int, tex_f, m, T_EMISSION, M_EMISSION, u, v)
+
+    @device
+    def principled_at(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v):
+        """The principled parameter tuple (layout P_*) of material m at (u, v)."""
+        base = param3(mat, mat_tex, tex_data, tex_int, tex_f, m, T_ALBEDO, M_ALBEDO, u, v)
+        transmission = unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m,
+                                   T_TRANSMISSION, M_TRANSMISSION, u, v))
+        eta = param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_ETA, M_ETA, u, v)
+        if not (eta > ZERO):
+            # derived from specular: F0 = 0.08 specular = ((eta - 1) / (eta + 1))^2
+            spec = unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_SPECULAR,
+                               M_SPECULAR, u, v))
+            eta = TWO / (ONE - math.sqrt(SPEC_K * spec)) - ONE
+        if transmission > ZERO and eta == ONE:
+            eta = ETA_MIN_TRANSMISSIVE
+        return (max(base[0], ZERO), max(base[1], ZERO), max(base[2], ZERO),
+                unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_ROUGHNESS,
+                            M_ROUGHNESS, u, v)),
+                unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_METALLIC,
+                            M_METALLIC, u, v)),
+                eta,
+                unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_SPEC_TINT,
+                            M_SPEC_TINT, u, v)),
+                unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_ANISOTROPIC,
+                            M_ANISOTROPIC, u, v)),
+                unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_SHEEN, M_SHEEN,
+                            u, v)),
+                unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_SHEEN_TINT,
+                            M_SHEEN_TINT, u, v)),
+                unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_CLEARCOAT,
+                            M_CLEARCOAT, u, v)),
+                unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_CLEARCOAT_GLOSS,
+                            M_CLEARCOAT_GLOSS, u, v)),
+                unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_SUBSURFACE,
+                            M_SUBSURFACE, u, v)),
+                transmission)
+
+    @device
+    def material_at(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v):
+        """(is_principled, parameter tuple) of material m at (u, v); a diffuse material
+        fills only the base colour (and eta 1)."""
+        alb = param3(mat, mat_tex, tex_data, tex_int, tex_f, m, T_ALBEDO, M_ALBEDO, u, v)
+        params = (alb[0], alb[1], alb[2], ZERO, ZERO, ONE, ZERO, ZERO, ZERO, ZERO,
+                  ZERO, ZERO, ZERO, ZERO)
+        is_principled = False
+        if PRINCIPLED:
+            is_principled = mat[m, M_TYPE] == MAT_PRINCIPLED
+            if is_principled:
+                params = principled_at(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v)
+        return is_principled, params
+
+    @device
+    def mapped_normal(mat_tex, tex_data, tex_int, tex_f, tri_t, tri, m, u, v, ns, tangent):
+        """The normal-mapped shading normal (OpenGL convention: +Y, green, along the
+        bitangent n x t times the handedness of the UV mapping), its tangent, and whether
+        that tangent is usable; ns and tangent unchanged where there is no normal map."""
+        has_tangent = True
+        tn = mat_tex[m, T_NORMAL]
+        if tn >= 0:
+            c = tex_lookup(tex_data, tex_int, tex_f, tn, u, v)
+            bt = scale(cross(ns, tangent), tri_t[tri, TRI_T_SIGN])
+            nm = add(add(scale(tangent, TWO * c[0] - ONE), scale(bt, TWO * c[1] - ONE)),
+                     scale(ns, TWO * c[2] - ONE))
+            if dot(nm, nm) > ZERO:
+                ns = normalize(nm)
+                tangent = madd(tangent, ns, -dot(tangent, ns))
+                if dot(tangent, tangent) > ZERO:
+                    tangent = normalize(tangent)
+                else:
+                    has_tangent = False
+        return ns, tangent, has_tangent
+
+    @device
+    def shading_frame(tri_n, tri_t, mat_tex, tex_data, tex_int, tex_f, tri, m, b1, b2, e1,
+                      ng, wo, transmissive, u, v):
+        """(ng, ns, tangent, bitangent): the geometric normal and the orthonormal shading
+        frame, both turned to wo's side unless the material is transmissive (an interface
+        with an inside keeps the geometric front side; anything else reflects on both
+        sides). The shading normal is interpolated (smooth meshes) and normal-mapped; one
+        that would put wo below its horizon is bent towards wo just enough to see it, or a
+        lit surface would turn black."""
+        side = ONE
+        if dot(ng, wo) < ZERO and not transmissive:
+            side = -ONE
+        ns = ng
+        if SMOOTH:
+            ns = normalize(interpolate3(tri_n, tri, TRI_N0, TRI_N1, TRI_N2, b1, b2))
+            if dot(ns, ng) < ZERO:
+                ns = neg(ns)
+        tangent = (ZERO, ZERO, ZERO)
+        bitangent = (ZERO, ZERO, ZERO)
+        has_tangent = False
+        if TANGENTS:
+            tt = interpolate3(tri_t, tri, TRI_T0, TRI_T1, TRI_T2, b1, b2)
+            tt = madd(tt, ns, -dot(tt, ns))
+            if dot(tt, tt) > ZERO:
+                tangent = normalize(tt)
+                has_tangent = True
+        if NORMAL_MAP:
+            if has_tangent:
+                ns, tangent, has_tangent = mapped_normal(mat_tex, tex_data, tex_int, tex_f,
+                                                         tri_t, tri, m, u, v, ns, tangent)
+        if side < ZERO:
+            ng = neg(ng)
+            ns = neg(ns)
+        s_o = ONE if dot(ng, wo) >= ZERO else -ONE
+        c_o = dot(ns, wo) * s_o
+        if c_o < HORIZON_EPS:
+            ns = normalize(madd(ns, wo, s_o * (HORIZON_EPS - c_o)))
+        if has_tangent:
+            tangent = tangent_on(tangent, ns)
+        elif PRINCIPLED:
+            # Without texture coordinates the tangent is dp/du of the triangle's
+            # barycentric parameterisation, its first edge, projected onto the shading
+            # normal: Mitsuba 3's choice, so that anisotropy can be checked against it.
+            tangent = tangent_on(e1, ns)
+        else:
+            tangent, bitangent = frame(ns)   # isotropic BSDFs only: any tangent will do
+        if PRINCIPLED or TANGENTS:
+            bitangent = cross(ns, tangent)
+        return ng, ns, tangent, bitangent
+
+    @device
+    def ray_origin(tri_n, tri, p, b1, b2, v0, e1, e2, ng):
+        """Where rays leaving on ng's side start: p (lifted off smooth-shaded triangles,
+        see terminator_lift) pushed off the surface along ng."""
+        if SMOOTH:
+            p = terminator_lift(p, b1, b2, v0, e1, e2, load3(tri_n, tri, TRI_N0),
+                                load3(tri_n, tri, TRI_N1), load3(tri_n, tri, TRI_N2), ng)
+        return offset_origin(p, ng)
+
+    return SurfaceSteps(tri_uv_at, material_at, emitted, shading_frame, ray_origin)
+
