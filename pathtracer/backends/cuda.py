@@ -12,7 +12,7 @@ BLOCK = (16, 8)
 
 @functools.lru_cache(maxsize=None)
 def pass_kernel(features):
-    render_pixel = make_render_pixel(features)
+    render_pixel = make_render_pixel(features, "cuda")
 
     @cuda.jit(cache=True)
     def render_pass(out, stats, sample_start, n_samples, seed, max_bounces, rr_depth, scene):

@@ -11,7 +11,7 @@ class PythonBackend:
     def __init__(self, scene, pixels=None):
         """``pixels``: optional list of (x, y) to render; other pixels stay black."""
         self.scene = scene
-        self.render_pixel = make_render_pixel(scene.features)
+        self.render_pixel = make_render_pixel(scene.features, "python")
         self.pixels = pixels
         self.out = np.zeros((scene.height, scene.width, 3), np.float32)
         self.stats = np.zeros((scene.height, scene.width, 3), np.int32)

@@ -26,7 +26,7 @@ import numpy as np
 
 from .camera import pinhole_ray, thin_lens_ray
 from .constants import INF, ONE, RR_MAX, ZERO
-from .device import device
+from .device import device, step_marker
 from .emitters import make_emitters
 from .layout import (D_BSDF_LOBE, D_BSDF_U, D_BSDF_V, D_FIRST_BOUNCE, D_LENS_U, D_LENS_V,
                      D_LIGHT_SELECT, D_LIGHT_U, D_LIGHT_V, D_PIXEL_X, D_PIXEL_Y, D_RR,
@@ -59,24 +59,26 @@ def russian_roulette(beta, bounce, rr_depth, key, dim):
 
 
 @functools.lru_cache(maxsize=None)
-def make_render_pixel(features):
+def make_render_pixel(features, target="cpu"):
     """Compile-time specialisation: returns ``render_pixel`` for scenes with ``features``."""
     S = specialise(features)
+    step = step_marker(target)
     THIN_LENS = S.thin_lens
     TRI_LIGHTS = S.tri_lights
     ANY_ENVIRONMENT = S.any_environment
     NEE = S.nee
-    surface = make_surface(features)
-    scatter = make_scatter(features)
-    emitters = make_emitters(features)
+    surface = make_surface(features, target)
+    scatter = make_scatter(features, target)
+    emitters = make_emitters(features, target)
     tri_uv_at, material_at, shading_frame, ray_origin = (
         surface.tri_uv_at, surface.material_at, surface.shading_frame, surface.ray_origin)
     local_wo, eval_world, sample_world, leave = (
         scatter.local_wo, scatter.eval_world, scatter.sample_world, scatter.leave)
-    sample_emitter, hit_emission, escaped = (
-        emitters.sample_emitter, emitters.hit_emission, emitters.escaped)
+    sample_emitter, emitter_radiance, hit_emission, escaped = (
+        emitters.sample_emitter, emitters.emitter_radiance, emitters.hit_emission,
+        emitters.escaped)
 
-    @device
+    @step
     def camera_ray(cam, px, py, key, width, height):
         """A uniform position in pixel (px, py) and, for the thin lens, on the lens."""
         if THIN_LENS:
@@ -87,19 +89,20 @@ def make_render_pixel(features):
         return pinhole_ray(cam, np.float32(px), np.float32(py), sample_1d(key, D_PIXEL_X),
                            sample_1d(key, D_PIXEL_Y), np.float32(width), np.float32(height))
 
-    @device
+    @step
     def direct_light(beta, is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, p,
-                     origin, tri, wi, t_max, le, pdf_light, is_delta, light_tri, tri_v,
-                     bvh_box, bvh_child, stack):
+                     origin, tri, wi, t_max, pdf_light, is_delta, light_tri, index, lu, lv,
+                     scene, stack):
         """The one shadow-ray-and-MIS tail of next-event estimation, for every emitter
-        kind: (radiance added, shadow rays traced)."""
+        kind (a sample_emitter record): (radiance added, shadow rays traced)."""
         f, pdf_bsdf = eval_world(is_principled, params, wo, wo_l, wi, tangent, bitangent, ns,
                                  ng)
         if not (max_comp(f) > ZERO):
             return (ZERO, ZERO, ZERO), 0
-        if any_hit(leave(p, ng, wi, origin), wi, t_max, tri, light_tri, tri_v, bvh_box,
-                   bvh_child, stack):
+        if any_hit(leave(p, ng, wi, origin), wi, t_max, tri, light_tri, scene.tri_v,
+                   scene.bvh_box, scene.bvh_child, stack):
             return (ZERO, ZERO, ZERO), 1
+        le = emitter_radiance(scene, wi, is_delta, light_tri, index, lu, lv)
         if is_delta:
             weight = ONE / pdf_light
         else:
@@ -157,14 +160,14 @@ def make_render_pixel(features):
             dim = D_FIRST_BOUNCE + bounce * DIMS_PER_BOUNCE
             # ---- next-event estimation: one emitter sample, one shadow ray ----
             if NEE:
-                wi, t_max, le, pdf_light, is_delta, light_tri = sample_emitter(
-                    scene, p, sample_1d(key, dim + D_LIGHT_SELECT), sample_1d(key, dim + D_LIGHT_U),
-                    sample_1d(key, dim + D_LIGHT_V))
+                wi, t_max, pdf_light, is_delta, light_tri, index, lu, lv = sample_emitter(
+                    scene, p, sample_1d(key, dim + D_LIGHT_SELECT),
+                    sample_1d(key, dim + D_LIGHT_U), sample_1d(key, dim + D_LIGHT_V))
                 if pdf_light > ZERO:
                     contribution, traced = direct_light(
                         beta, is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, p,
-                        origin, tri, wi, t_max, le, pdf_light, is_delta, light_tri,
-                        scene.tri_v, scene.bvh_box, scene.bvh_child, stack)
+                        origin, tri, wi, t_max, pdf_light, is_delta, light_tri, index, lu, lv,
+                        scene, stack)
                     radiance = add(radiance, contribution)
                     n_shadow_rays += traced
             # ---- BSDF sampling: the next ray ----

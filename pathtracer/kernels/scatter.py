@@ -9,7 +9,7 @@ import functools
 from typing import NamedTuple
 
 from .constants import INV_PI, ONE, TWO, ZERO
-from .device import device
+from .device import device, step_marker
 from .layout import P_BASE, specialise
 from .materials import diffuse_eval_local, diffuse_sample_local
 from .principled import principled_eval, principled_sample
@@ -49,35 +49,36 @@ class ScatterSteps(NamedTuple):
 
 
 @functools.lru_cache(maxsize=None)
-def make_scatter(features):
+def make_scatter(features, target="cpu"):
     """The scattering steps for scenes with ``features``."""
     S = specialise(features)
+    step = step_marker(target)
     PRINCIPLED = S.principled
     FOLD = S.fold
     LEAN = S.lean
 
-    @device
+    @step
     def bsdf_eval(is_principled, params, wo_l, wi_l):
         if PRINCIPLED:
             if is_principled:
                 return principled_eval(params, wo_l, wi_l)
         return diffuse_eval_local(base_color(params), wo_l, wi_l)
 
-    @device
+    @step
     def bsdf_sample(is_principled, params, wo_l, u_lobe, u1, u2):
         if PRINCIPLED:
             if is_principled:
                 return principled_sample(params, wo_l, u_lobe, u1, u2)
         return diffuse_sample_local(base_color(params), wo_l, u1, u2)
 
-    @device
+    @step
     def local_wo(wo, t, s, n):
         """wo in the shading frame (the Lambertian-only kernel needs only its side)."""
         if LEAN:
             return (ZERO, ZERO, ONE)
         return to_local(wo, t, s, n)
 
-    @device
+    @step
     def eval_world(is_principled, params, wo, wo_l, wi, t, s, n, ng):
         """BSDF * |cos| and pdf for world direction wi.
 
@@ -111,7 +112,7 @@ def make_scatter(features):
                 pdf += pdf2
         return f, pdf
 
-    @device
+    @step
     def sample_world(is_principled, params, wo, wo_l, t, s, n, ng, u_lobe, u1, u2):
         """(wi, weight = f |cos| / pdf, pdf) of a sampled world direction; pdf = 0: the
         path is absorbed. A direction on the wrong side of the geometric surface is folded
@@ -134,7 +135,7 @@ def make_scatter(features):
             weight = scale(f, ONE / pdf_bsdf)
         return wi, weight, pdf_bsdf
 
-    @device
+    @step
     def leave(p, ng, w, origin):
         """Origin of a ray leaving p towards w: on w's side of the surface. Only
         transmissive materials send rays to the other side of ng (turned to wo)."""

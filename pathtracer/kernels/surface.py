@@ -11,7 +11,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .constants import ONE, OFFSET_REL, TWO, ZERO
-from .device import device
+from .device import device, step_marker
 from .layout import (M_ALBEDO, M_ANISOTROPIC, M_CLEARCOAT, M_CLEARCOAT_GLOSS, M_EMISSION,
                      M_ETA, M_METALLIC, M_ROUGHNESS, M_SHEEN, M_SHEEN_TINT, M_SPEC_TINT,
                      M_SPECULAR, M_SUBSURFACE, M_TRANSMISSION, M_TYPE, MAT_PRINCIPLED,
@@ -87,17 +87,18 @@ class SurfaceSteps(NamedTuple):
 
 
 @functools.lru_cache(maxsize=None)
-def make_surface(features):
+def make_surface(features, target="cpu"):
     """The surface steps for scenes with ``features`` (branches on unused features removed
     before compilation; conditions are constants alone, which is what Numba prunes)."""
     S = specialise(features)
+    step = step_marker(target)
     TEXTURES = S.textures
     PRINCIPLED = S.principled
     SMOOTH = S.smooth
     TANGENTS = S.tangents
     NORMAL_MAP = S.normal_map
 
-    @device
+    @step
     def param1(mat, mat_tex, tex_data, tex_int, tex_f, m, slot, col, u, v):
         """A number parameter of material m, from its texture when it has one."""
         if TEXTURES:
@@ -107,7 +108,7 @@ def make_surface(features):
                 return lum(r, g, b)
         return mat[m, col]
 
-    @device
+    @step
     def param3(mat, mat_tex, tex_data, tex_int, tex_f, m, slot, col, u, v):
         """A colour parameter of material m, from its texture when it has one."""
         if TEXTURES:
@@ -116,7 +117,7 @@ def make_surface(features):
                 return tex_lookup(tex_data, tex_int, tex_f, t, u, v)
         return mat[m, col], mat[m, col + 1], mat[m, col + 2]
 
-    @device
+    @step
     def tri_uv_at(tri_uv, tri, b1, b2):
         """Texture coordinates at barycentrics (b1, b2) of triangle tri."""
         if TEXTURES:
@@ -127,12 +128,12 @@ def make_surface(features):
                     b2 * tri_uv[tri, TRI_UV2 + 1])
         return ZERO, ZERO
 
-    @device
+    @step
     def emitted(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v):
         """Emitted radiance of material m at texture coordinates (u, v)."""
         return param3(mat, mat_tex, tex_data, tex_int, tex_f, m, T_EMISSION, M_EMISSION, u, v)
 
-    @device
+    @step
     def principled_at(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v):
         """The principled parameter tuple (layout P_*) of material m at (u, v)."""
         base = param3(mat, mat_tex, tex_data, tex_int, tex_f, m, T_ALBEDO, M_ALBEDO, u, v)
@@ -168,7 +169,7 @@ def make_surface(features):
                             M_SUBSURFACE, u, v)),
                 transmission)
 
-    @device
+    @step
     def material_at(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v):
         """(is_principled, parameter tuple) of material m at (u, v); a diffuse material
         fills only the base colour (and eta 1)."""
@@ -182,7 +183,7 @@ def make_surface(features):
                 params = principled_at(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v)
         return is_principled, params
 
-    @device
+    @step
     def mapped_normal(mat_tex, tex_data, tex_int, tex_f, tri_t, tri, m, u, v, ns, tangent):
         """The normal-mapped shading normal (OpenGL convention: +Y, green, along the
         bitangent n x t times the handedness of the UV mapping), its tangent, and whether
@@ -203,7 +204,7 @@ def make_surface(features):
                     has_tangent = False
         return ns, tangent, has_tangent
 
-    @device
+    @step
     def shading_frame(tri_n, tri_t, mat_tex, tex_data, tex_int, tex_f, tri, m, b1, b2, e1,
                       ng, wo, transmissive, u, v):
         """(ng, ns, tangent, bitangent): the geometric normal and the orthonormal shading
@@ -253,7 +254,7 @@ def make_surface(features):
             bitangent = cross(ns, tangent)
         return ng, ns, tangent, bitangent
 
-    @device
+    @step
     def ray_origin(tri_n, tri, p, b1, b2, v0, e1, e2, ng):
         """Where rays leaving on ng's side start: p (lifted off smooth-shaded triangles,
         see terminator_lift) pushed off the surface along ng."""
