@@ -237,9 +237,11 @@ def section_filtering(backend_name, res, spp, repeats, r):
     desc = load_scene_description(os.path.join(ROOT, "scenes", "textured.json"))
     desc.camera.resolution = res
     out = {}
+    from pathtracer.kernels.layout import FILTER_BILINEAR, FILTER_NEAREST, TEX_FILTER
     for filt in ("bilinear", "nearest"):
         scene = compile_scene(desc)
-        scene.arrays.tex_int[:, 3] = 1 if filt == "nearest" else 0
+        scene.arrays.tex_int[:, TEX_FILTER] = (FILTER_NEAREST if filt == "nearest" else
+                                               FILTER_BILINEAR)
         t = _pass_time(make_backend(backend_name, scene), scene, spp, repeats)
         out[filt] = res[0] * res[1] * spp / t
         r.add("filtering", "textured", f"pt-render {backend_name}", "camera_paths_per_s",

@@ -3,6 +3,8 @@ geometry."""
 import os
 
 import numpy as np
+
+from pathtracer.kernels import layout as L
 import pytest
 from numba import njit
 
@@ -15,10 +17,10 @@ from tests.conftest import SHARED, needs_shared
 
 
 def tri_rows(pos):
-    tri_v = np.zeros((max(1, len(pos)), 9), np.float32)
-    tri_v[:len(pos), 0:3] = pos[:, 0]
-    tri_v[:len(pos), 3:6] = pos[:, 1] - pos[:, 0]
-    tri_v[:len(pos), 6:9] = pos[:, 2] - pos[:, 0]
+    tri_v = np.zeros((max(1, len(pos)), L.TRI_V_WIDTH), np.float32)
+    tri_v[:len(pos), L.TRI_V0:L.TRI_V0 + 3] = pos[:, 0]
+    tri_v[:len(pos), L.TRI_E1:L.TRI_E1 + 3] = pos[:, 1] - pos[:, 0]
+    tri_v[:len(pos), L.TRI_E2:L.TRI_E2 + 3] = pos[:, 2] - pos[:, 0]
     return tri_v
 
 
@@ -205,4 +207,4 @@ def test_benchmark_variants_trace_the_same(rng, options):
     bvh, _, _ = check_against_brute_force(v, origins, dirs, **options)
     check_structure(bvh, v)
     if options.get("split") == "none":
-        assert len(bvh.box) == 1 and bvh.child[0, 1] == len(v)
+        assert len(bvh.box) == 1 and bvh.child[0, L.CHILD0_COUNT] == len(v)

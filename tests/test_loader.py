@@ -5,6 +5,8 @@ import subprocess
 import sys
 
 import numpy as np
+
+from pathtracer.kernels import layout as L
 import pytest
 
 from pathtracer.scene import SceneError, load_scene, load_scene_description
@@ -112,7 +114,9 @@ def test_obj_negative_indices_and_quads(tmp_path):
     s = load_scene(write_scene(tmp_path, scene))
     assert s.n_triangles == 2
     # Both triangles keep the quad's counter-clockwise winding: normal +z.
-    n = np.cross(s.arrays.tri_v[:2, 3:6], s.arrays.tri_v[:2, 6:9])
+    e1 = s.arrays.tri_v[:2, L.TRI_E1:L.TRI_E1 + 3]
+    e2 = s.arrays.tri_v[:2, L.TRI_E2:L.TRI_E2 + 3]
+    n = np.cross(e1, e2)
     assert (n[:, 2] > 0).all()
 
 
@@ -163,7 +167,7 @@ def test_transform_and_mirroring(tmp_path):
     scene["objects"][0]["transform"] = {"translate": [1, 2, 3], "rotate": [0, 0, 90],
                                         "scale": [2, 1, 1]}
     s = load_scene(write_scene(tmp_path, scene))
-    v = s.arrays.tri_v[:12, 0:3] + s.origin_shift    # the compiler re-centres the scene
+    v = s.arrays.tri_v[:12, L.TRI_V0:L.TRI_V0 + 3] + s.origin_shift    # the compiler re-centres the scene
     assert np.allclose(s.origin_shift, [1, 2, 3])
     assert np.allclose(v.min(0), [0, 0, 2]) and np.allclose(v.max(0), [2, 4, 4])
     # A mirroring matrix keeps triangles facing outward.

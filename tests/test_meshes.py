@@ -3,6 +3,8 @@ import os
 
 import numpy as np
 
+from pathtracer.kernels import layout as L
+
 from pathtracer.scene import load_scene
 from pathtracer.scene.meshes import load_obj
 from tests.conftest import needs_shared, ROOT, SHARED
@@ -26,7 +28,7 @@ def test_mtl_materials_map_to_diffuse_and_emission(tmp_path, monkeypatch):
     monkeypatch.setenv("PT_RENDER_CACHE", str(tmp_path / "cache"))
     scene = load_scene(os.path.join(ROOT, "scenes", "cornell-box.json"))
     mat = scene.arrays.mat
-    emissive = mat[:, 3:6].max(1) > 0
+    emissive = mat[:, L.M_EMISSION:L.M_EMISSION + 3].max(1) > 0
     assert emissive.sum() == 1
     assert np.allclose(mat[emissive][0, :6], [0.885809, 0.698859, 0.666422, 18.387, 13.9873,
                                               6.75357])
@@ -39,7 +41,7 @@ def test_faces_without_material_are_grey(tmp_path):
     scene = {"camera": {"resolution": [4, 4], "position": [0, 0, 3]},
              "objects": [{"name": "t", "file": "t.obj"}]}
     s = load_scene(write_scene(tmp_path, scene))
-    assert np.allclose(s.arrays.mat[s.arrays.tri_mat[0], :3], 0.5)
+    assert np.allclose(s.arrays.mat[s.arrays.tri_mat[0], L.M_ALBEDO:L.M_ALBEDO + 3], 0.5)
 
 
 @needs_shared

@@ -2,6 +2,8 @@
 import os
 
 import numpy as np
+
+from pathtracer.kernels import layout as L
 import pytest
 
 from pathtracer.backends import make_backend
@@ -140,7 +142,7 @@ def test_smooth_normals_render_finite(tmp_path):
 def test_nonfinite_samples_are_counted(tmp_path):
     """The NaN/Inf counter works (so 'nonfinite == 0' in the other tests means something)."""
     scene = load_scene(write_scene(tmp_path, furnace_scene(0.5, 0.5, 2, res=(4, 4))))
-    scene.arrays.mat[0, 3] = np.nan   # poison the emission behind the loader's back
+    scene.arrays.mat[0, L.M_EMISSION] = np.nan   # poison the emission behind the loader's back
     result = render(scene, make_backend("cpu", scene), spp=2)
     assert result.film.nonfinite == 4 * 4 * 2
 

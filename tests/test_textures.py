@@ -5,6 +5,8 @@ import os
 
 import imageio.v3 as iio
 import numpy as np
+
+from pathtracer.kernels import layout as L
 import pytest
 
 from pathtracer.kernels.camera import thin_lens_ray
@@ -118,15 +120,15 @@ def test_tangents_follow_u():
 
 
 def test_thin_lens_rays_meet_on_the_plane_in_focus():
-    cam = np.zeros(16, F)
-    cam[3:6] = [0, 0, -1]
+    cam = np.zeros(L.CAM_SIZE, F)
+    cam[L.CAM_FORWARD:L.CAM_FORWARD + 3] = [0, 0, -1]
     tan = math.tan(math.radians(20))
-    cam[6:9] = [tan, 0, 0]
-    cam[9:12] = [0, tan, 0]
+    cam[L.CAM_RIGHT:L.CAM_RIGHT + 3] = [tan, 0, 0]
+    cam[L.CAM_UP:L.CAM_UP + 3] = [0, tan, 0]
     radius, focus = 0.05, 3.0
-    cam[12] = radius / tan
-    cam[13] = radius / tan
-    cam[14] = focus
+    cam[L.CAM_LENS_X] = radius / tan
+    cam[L.CAM_LENS_Y] = radius / tan
+    cam[L.CAM_FOCUS] = focus
     pts, origins = [], []
     for lu, lv in np.random.default_rng(0).random((50, 2)):
         o, d = thin_lens_ray(cam, F(10), F(7), F(0.5), F(0.5), F(lu), F(lv), F(32), F(32))
@@ -157,7 +159,7 @@ def test_thesis_folders_render(name):
     cam = s.description.camera
     # its camera at z = -10 looking along +z, in our space at z = +10 looking along -z
     assert cam.position == (0, 0, 10)
-    assert np.allclose(s.arrays.cam[3:6], [0, 0, -1])
+    assert np.allclose(s.arrays.cam[L.CAM_FORWARD:L.CAM_FORWARD + 3], [0, 0, -1])
     assert cam.fov == pytest.approx(math.degrees(2 * math.atan(0.035 / 0.1)))
     assert s.features.thin_lens and s.features.principled
 

@@ -28,7 +28,7 @@ from ..kernels.envmap import environment_tables
 from ..kernels.layout import (CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_LENS_Y, CAM_ORIGIN,
                               CAM_RIGHT, CAM_SIZE, CAM_UP, ENV_COS_ROT, ENV_INFO_SIZE,
                               ENV_P_SELECT, ENV_SIN_ROT, FILTER_BILINEAR, FILTER_NEAREST,
-                              M_ALBEDO, M_EMISSION, M_ETA, M_TWO_SIDED, M_TYPE,
+                              M_ALBEDO, M_ANISOTROPIC, M_EMISSION, M_ETA, M_TWO_SIDED, M_TYPE,
                               MAT_DIFFUSE, MAT_PRINCIPLED, MAT_WIDTH, MATERIAL_PARAMS,
                               N_SLOTS, NO_TEXTURE, PL_INTENSITY, PL_POSITION, PL_WIDTH,
                               T_ALBEDO, T_EMISSION, T_NORMAL, TEX_F_WIDTH, TEX_FILTER,
@@ -197,7 +197,7 @@ class MaterialTables:
                     tex[prm.slot] = self.texture(textures[prm.key])
             if "eta" not in numbers and "eta" not in textures:
                 row[M_ETA] = 0.0     # derived from specular in the kernel
-            if row[PARAM_ANISOTROPIC.column] > 0 or "anisotropic" in textures:
+            if row[M_ANISOTROPIC] > 0 or "anisotropic" in textures:
                 self.any_anisotropic = True
             if normal_map is not None:
                 tex[T_NORMAL] = self.texture(normal_map)
@@ -233,9 +233,6 @@ class MaterialTables:
             tex_f[i, TEX_OFFSET:TEX_OFFSET + 2] = offset
             tex_f[i, TEX_SCALE:TEX_SCALE + 3] = scale
         return mat, mat_tex, tex_data.astype(np.float32), tex_int, tex_f
-
-
-PARAM_ANISOTROPIC = next(p for p in MATERIAL_PARAMS if p.key == "anisotropic")
 
 
 def compile_materials(desc):
