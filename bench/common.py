@@ -71,6 +71,67 @@ def median_time(fn, repeats):
     return statistics.median(times), times
 
 
+# Dr.Jit's LLVM backend loads the system libLLVM. LLVM 14 is refused and LLVM 15 aborts the
+# process while compiling Mitsuba's path integrator ("Cannot select: fminimum", seen on Debian
+# 12, 2026-11-23), so a newer one is looked for when the default fails.
+_LLVM_CANDIDATES = ("/usr/lib/x86_64-linux-gnu/libLLVM-{v}.so", "/usr/lib/llvm-{v}/lib/libLLVM.so",
+                    "/usr/lib/x86_64-linux-gnu/libLLVM.so.{v}.1")
+_PROBE = ("import mitsuba as mi, drjit as dr; mi.set_variant({v!r}); "
+          "d = mi.cornell_box(); d['sensor']['film']['width'] = 8; "
+          "d['sensor']['film']['height'] = 8; "
+          "dr.eval(mi.render(mi.load_dict(d), spp=1)); print('ok')")
+
+
+def _probe_mitsuba(variant, env):
+    try:
+        r = subprocess.run([sys.executable, "-c", _PROBE.format(v=variant)], env=env,
+                           capture_output=True, text=True, timeout=600)
+    except subprocess.TimeoutExpired:
+        return "timed out"
+    if r.returncode == 0 and r.stdout.strip().endswith("ok"):
+        return None
+    last = [ln for ln in (r.stderr or "").splitlines() if ln.strip()]
+    first = next((ln for ln in last if "ERROR" in ln or "Error" in ln), last[-1] if last else "")
+    return f"exit {r.returncode}: {first.strip()[:160]}"
+
+
+_MITSUBA_STATUS = {}
+
+
+def usable_mitsuba(variant):
+    """Whether Mitsuba 3 can render with ``variant`` in this process, as (ok, why not).
+
+    Tried in a child process first, because a failing JIT aborts its process (no exception to
+    catch). For ``llvm_*`` variants with no DRJIT_LIBLLVM_PATH set, a newer system libLLVM is
+    tried when the default one fails; the one that works is put in this process's environment
+    before Mitsuba is imported here."""
+    if variant in _MITSUBA_STATUS:
+        return _MITSUBA_STATUS[variant]
+    try:
+        import importlib.util
+        if importlib.util.find_spec("mitsuba") is None:
+            raise ImportError
+    except ImportError:
+        _MITSUBA_STATUS[variant] = (False, "Mitsuba not installed (pip install -e .[bench])")
+        return _MITSUBA_STATUS[variant]
+    why = _probe_mitsuba(variant, dict(os.environ))
+    if why and variant.startswith("llvm") and "DRJIT_LIBLLVM_PATH" not in os.environ:
+        for v in range(30, 15, -1):
+            for pattern in _LLVM_CANDIDATES:
+                lib = pattern.format(v=v)
+                if os.path.exists(lib) and not _probe_mitsuba(
+                        variant, dict(os.environ, DRJIT_LIBLLVM_PATH=lib)):
+                    os.environ["DRJIT_LIBLLVM_PATH"] = lib
+                    why = None
+                    break
+            if why is None:
+                break
+        else:
+            why += " (and no newer libLLVM found: e.g. apt install libllvm19)"
+    _MITSUBA_STATUS[variant] = (why is None, why)
+    return _MITSUBA_STATUS[variant]
+
+
 def mitsuba_cornell(width, height, spp, max_depth=8):
     """Mitsuba 3's own Cornell box (the reference's scene) with a box pixel filter."""
     import mitsuba as mi

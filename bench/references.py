@@ -98,6 +98,11 @@ def main(argv=None):
     p.add_argument("--out", default=REFERENCES)
     a = p.parse_args(argv)
     os.makedirs(a.out, exist_ok=True)
+    if a.mitsuba:
+        from bench.common import usable_mitsuba
+        ok, why = usable_mitsuba(a.mitsuba)
+        if not ok:
+            p.error(f"Mitsuba {a.mitsuba} cannot render here: {why}")
     for name in a.scenes:
         if a.mitsuba:
             from pathtracer.mitsuba import NotExpressible

@@ -29,7 +29,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
-from bench.common import command, machine, now, versions  # noqa: E402
+from bench.common import command, machine, now, usable_mitsuba, versions  # noqa: E402
 from bench.metrics import rays_per_second, relmse, time_to_threshold  # noqa: E402
 from bench.scenes import (CONVERGENCE, convergence_desc, load_reference,  # noqa: E402
                           mesh_desc)
@@ -127,12 +127,7 @@ def section_convergence(scenes, backends, mitsuba_variant, max_spp, r):
             noise[name, f"pt-render {b}"] = meta.get("noise_relmse")
         if mitsuba_variant:
             peer = f"Mitsuba {mitsuba_variant}"
-            try:
-                pts = convergence_mitsuba(mitsuba_variant, name, max_spp)
-            except ImportError:
-                print("bench: Mitsuba not installed: no peer curves", file=sys.stderr)
-                mitsuba_variant = None
-                continue
+            pts = convergence_mitsuba(mitsuba_variant, name, max_spp)
             if pts:
                 curves[name, peer] = pts
                 if name != "cornell-box":
@@ -550,6 +545,12 @@ def main(argv=None):
     r = Results(out)
     b = "cuda" if args.gpu else "cpu"
     peer = None if args.no_mitsuba else ("cuda_ad_rgb" if args.gpu else "llvm_ad_rgb")
+    if peer and "convergence" in args.sections:
+        ok, why = usable_mitsuba(peer)
+        if not ok:
+            print(f"bench: Mitsuba {peer} cannot render here ({why}): no peer curves",
+                  file=sys.stderr)
+            peer = None
     if args.tiny:
         max_spp, tp, repeats, filt_res, mres = 2, ((64, 64), 2), 2, (32, 24), ((32, 32), 1)
     elif args.quick:

@@ -24,7 +24,7 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from bench.common import (CORNELL, command, machine, median_time, mitsuba_cornell,  # noqa: E402
-                          now, versions)
+                          now, usable_mitsuba, versions)
 
 
 def ours(backend_name, resolution, spp_per_pass, repeats):
@@ -67,6 +67,10 @@ def ours(backend_name, resolution, spp_per_pass, repeats):
 
 
 def mitsuba(variant, resolution, spp, repeats):
+    ok, why = usable_mitsuba(variant)
+    if not ok:
+        print(f"throughput: Mitsuba {variant} cannot render here ({why})", file=sys.stderr)
+        return None
     import drjit as dr
     import mitsuba as mi
     mi.set_variant(variant)
@@ -163,11 +167,13 @@ def main():
         rec["results"].append(ours("cpu", (256, 256), 16, a.repeats))
         if a.mitsuba:
             rec["results"].append(mitsuba("llvm_ad_rgb", (256, 256), 16, a.repeats))
+            rec["results"] = [x for x in rec["results"] if x]
         rec["compile_cpu"] = compile_times("cpu")
     if a.gpu:
         rec["results"].append(ours("cuda", (1024, 1024), 64, a.repeats))
         if a.mitsuba:
             rec["results"].append(mitsuba("cuda_ad_rgb", (1024, 1024), 64, a.repeats))
+            rec["results"] = [x for x in rec["results"] if x]
         rec["compile_cuda"] = compile_times("cuda")
     if a.big_mesh:
         rec["big_mesh"] = big_mesh(a.big_mesh)
