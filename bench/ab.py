@@ -64,7 +64,13 @@ def worker(args):
     assert os.path.abspath(pathtracer.__file__).startswith(os.path.abspath(args.tree))
     res = tuple(int(x) for x in args.resolution.split("x"))
     scene = compile_scene(_describe(args.scene, res))
-    backend = make_backend(args.backend, scene)
+    options = json.loads(args.options) if args.options else {}
+    if options:
+        import inspect
+        from pathtracer.backends import cuda as cuda_backend
+        known = inspect.signature(cuda_backend.CUDABackend).parameters
+        options = {k: v for k, v in options.items() if k in known}   # older trees lack some
+    backend = make_backend(args.backend, scene, **options)
     t0 = time.perf_counter()
     backend.compile()
     compile_s = time.perf_counter() - t0
@@ -98,10 +104,13 @@ def worker(args):
     print(json.dumps(out))
 
 
-def _run_worker(tree, scene, backend, resolution, spp, mode, repeats=0, save=None):
+def _run_worker(tree, scene, backend, resolution, spp, mode, repeats=0, save=None,
+                options=None):
     cmd = [sys.executable, "-m", "bench.ab", "_worker", "--tree", tree, "--scene", scene,
            "--backend", backend, "--resolution", "%dx%d" % tuple(resolution), "--spp",
            str(spp), "--mode", mode, "--repeats", str(repeats)]
+    if options:
+        cmd += ["--options", options]
     if save:
         cmd += ["--save", save]
     p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
@@ -124,7 +133,8 @@ def throughput(args):
         for r in range(args.rounds):
             order = args.trees if r % 2 == 0 else args.trees[::-1]
             for tree in order:
-                got = _run_worker(tree, name, args.backend, res, spp, "time", args.repeats)
+                got = _run_worker(tree, name, args.backend, res, spp, "time", args.repeats,
+                                  options=args.options)
                 per_tree[tree].append(got["paths_per_s"])
                 record["results"].append(got)
         medians = {t: statistics.median(v) for t, v in per_tree.items()}
@@ -174,6 +184,8 @@ def main(argv=None):
     t.add_argument("--repeats", type=int, default=5)
     t.add_argument("--rounds", type=int, default=2)
     t.add_argument("--json")
+    t.add_argument("--options", help='backend options of the trees that take them, as JSON '
+                   '(e.g. \'{"target_threads": 1}\')')
     i = sub.add_parser("images")
     i.add_argument("--trees", nargs=2, required=True)
     i.add_argument("--scenes", nargs="*")
@@ -187,6 +199,7 @@ def main(argv=None):
         w.add_argument(k)
     w.add_argument("--spp", type=int)
     w.add_argument("--repeats", type=int, default=5)
+    w.add_argument("--options")
     args = p.parse_args(argv)
     {"throughput": throughput, "images": images, "_worker": worker}[args.cmd](args)
 

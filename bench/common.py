@@ -142,3 +142,24 @@ def mitsuba_cornell(width, height, spp, max_depth=8):
     d["sensor"]["sampler"] = {"type": "independent", "sample_count": spp}
     d["integrator"] = {"type": "path", "max_depth": max_depth}
     return mi.load_dict(d)
+
+
+def mitsuba_pass_times(scene, spp, repeats):
+    """(first render s, median s, all s) of Mitsuba rendering ``scene`` (loaded, variant set)
+    at ``spp``: a first render (its JIT compile included), then ``repeats`` timed ones, each
+    waited for (dr.sync_thread) and with a new seed."""
+    import drjit as dr
+    import mitsuba as mi
+    seed = [0]
+
+    def one():
+        img = mi.render(scene, spp=spp, seed=seed[0])
+        dr.eval(img)
+        dr.sync_thread()
+        seed[0] += 1
+
+    t0 = time.perf_counter()
+    one()
+    first = time.perf_counter() - t0
+    t, times = median_time(one, repeats)
+    return first, t, times

@@ -1,6 +1,6 @@
 """Render the gallery scenes of scenes/ into docs/images/ (README and docs/gallery.md).
 
-    python bench/gallery.py [--spp N] [--backend auto|cpu|cuda] [--out docs/images]
+    python -m bench.gallery [--spp N] [--backend auto|cpu|cuda] [--out docs/images]
 """
 import argparse
 import os

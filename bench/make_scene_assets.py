@@ -1,7 +1,7 @@
 """Make the small assets of the gallery scenes in scenes/assets/ from ../shared/assets
 (downsized copies of CC0 / MIT data; scenes/assets/LICENSE.md names the sources).
 
-    python bench/make_scene_assets.py [../shared]
+    python -m bench.make_scene_assets [../shared]
 """
 import os
 import shutil
@@ -9,11 +9,11 @@ import sys
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
+from pathtracer.film import linear_to_srgb, write_image
+from pathtracer.scene.geometry import uv_sphere
+from pathtracer.scene.images import read_image, srgb_to_linear
 
-from pathtracer.film import linear_to_srgb, write_image  # noqa: E402
-from pathtracer.scene.images import read_image, srgb_to_linear  # noqa: E402
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def box_down(img, k):
@@ -62,23 +62,13 @@ def main():
 
 def sphere(path, n_theta=24, n_phi=48):
     """UV sphere of radius 1 with normals and texture coordinates."""
+    verts, faces, uvs = uv_sphere(n_theta, n_phi, seam=True)
     lines = ["# UV sphere, radius 1 (bench/make_scene_assets.py)"]
-    for i in range(n_theta + 1):
-        t = np.pi * i / n_theta
-        for j in range(n_phi + 1):
-            p = 2 * np.pi * j / n_phi
-            x, y, z = np.sin(t) * np.cos(p), np.cos(t), -np.sin(t) * np.sin(p)
-            lines.append(f"v {x:.6f} {y:.6f} {z:.6f}")
-            lines.append(f"vn {x:.6f} {y:.6f} {z:.6f}")
-            lines.append(f"vt {j / n_phi:.6f} {1 - i / n_theta:.6f}")
-    for i in range(n_theta):
-        for j in range(n_phi):
-            a = i * (n_phi + 1) + j + 1
-            b, c, d = a + 1, a + n_phi + 1, a + n_phi + 2
-            if i > 0:
-                lines.append(f"f {a}/{a}/{a} {c}/{c}/{c} {b}/{b}/{b}")
-            if i < n_theta - 1:
-                lines.append(f"f {b}/{b}/{b} {c}/{c}/{c} {d}/{d}/{d}")
+    for (x, y, z), (u, v) in zip(verts, uvs):
+        lines.append(f"v {x:.6f} {y:.6f} {z:.6f}")
+        lines.append(f"vn {x:.6f} {y:.6f} {z:.6f}")
+        lines.append(f"vt {u:.6f} {v:.6f}")
+    lines += ["f {0}/{0}/{0} {1}/{1}/{1} {2}/{2}/{2}".format(*(f + 1)) for f in faces]
     open(path, "w").write("\n".join(lines) + "\n")
 
 

@@ -22,12 +22,10 @@ import time
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if ROOT not in sys.path:
-    sys.path.insert(0, ROOT)
 
-from bench.common import command, machine, now, versions  # noqa: E402
-from bench.metrics import relmse  # noqa: E402
-from bench.scenes import (CONVERGENCE, REFERENCES, convergence_desc, load_reference,  # noqa: E402
+from bench.common import command, machine, now, versions
+from bench.metrics import relmse
+from bench.scenes import (CONVERGENCE, REFERENCES, convergence_desc, load_reference,
                           reference_path)
 
 SEEDS = (1_000_003, 2_000_029)

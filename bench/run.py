@@ -26,12 +26,10 @@ import time
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if ROOT not in sys.path:
-    sys.path.insert(0, ROOT)
 
-from bench.common import command, machine, now, usable_mitsuba, versions  # noqa: E402
-from bench.metrics import rays_per_second, relmse, time_to_threshold  # noqa: E402
-from bench.scenes import (CONVERGENCE, convergence_desc, load_reference,  # noqa: E402
+from bench.common import command, machine, now, usable_mitsuba, versions
+from bench.metrics import rays_per_second, relmse, time_to_threshold
+from bench.scenes import (CONVERGENCE, convergence_desc, load_reference,
                           mesh_desc)
 
 FIELDS = ["section", "scene", "renderer", "parameter", "value", "metric", "result", "unit",

@@ -16,10 +16,8 @@ import sys
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if ROOT not in sys.path:
-    sys.path.insert(0, ROOT)
 
-from bench.common import SHARED, median_time  # noqa: E402
+from bench.common import SHARED, median_time
 
 MESH_DIR = os.path.join(ROOT, "bench", "out", "meshes")
 

@@ -10,8 +10,8 @@ Measures, in one run on one machine:
 
 Writes a JSON record and prints a markdown table.
 
-    python bench/throughput.py --cpu [--mitsuba] [--big-mesh PATH] [--json OUT]
-    python bench/throughput.py --gpu [--mitsuba] [--json OUT]
+    python -m bench.throughput --cpu [--mitsuba] [--big-mesh PATH] [--json OUT]
+    python -m bench.throughput --gpu [--mitsuba] [--json OUT]
 """
 import argparse
 import json
@@ -21,9 +21,9 @@ import sys
 import tempfile
 import time
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from bench.common import (CORNELL, command, machine, median_time, mitsuba_cornell,  # noqa: E402
+from bench.common import (CORNELL, command, machine, median_time, mitsuba_cornell,
+                          mitsuba_pass_times,
                           now, usable_mitsuba, versions)
 
 
@@ -71,22 +71,10 @@ def mitsuba(variant, resolution, spp, repeats):
     if not ok:
         print(f"throughput: Mitsuba {variant} cannot render here ({why})", file=sys.stderr)
         return None
-    import drjit as dr
     import mitsuba as mi
     mi.set_variant(variant)
     scene = mitsuba_cornell(resolution[0], resolution[1], spp)
-    seed = [0]
-
-    def one():
-        img = mi.render(scene, spp=spp, seed=seed[0])
-        dr.eval(img)
-        dr.sync_thread()
-        seed[0] += 1
-
-    t0 = time.perf_counter()
-    one()
-    first = time.perf_counter() - t0
-    t, times = median_time(one, repeats)
+    first, t, times = mitsuba_pass_times(scene, spp, repeats)
     return {"renderer": f"Mitsuba {mi.__version__} {variant}", "resolution": list(resolution),
             "spp_per_pass": spp, "repeats": repeats, "pass_s_median": t, "pass_s_all": times,
             "paths_per_s": resolution[0] * resolution[1] * spp / t, "first_render_s": first}

@@ -9,6 +9,7 @@ from pathtracer.backends import make_backend
 from pathtracer.kernels.layout import P_FIELDS
 from pathtracer.kernels.rng import path_key, sample_1d
 from pathtracer.render import render
+from pathtracer.scene.geometry import uv_sphere
 
 
 def write_scene(tmp_path, scene, name="scene.json"):
@@ -42,29 +43,9 @@ def box_mesh(half=1.0):
 
 
 def sphere_mesh(n_theta=12, n_phi=24, radius=1.0):
-    """A closed UV sphere, triangles facing outward."""
-    verts = [[0, radius, 0]]
-    for i in range(1, n_theta):
-        th = np.pi * i / n_theta
-        for j in range(n_phi):
-            ph = 2 * np.pi * j / n_phi
-            verts.append([radius * np.sin(th) * np.cos(ph), radius * np.cos(th),
-                          radius * np.sin(th) * np.sin(ph)])
-    verts.append([0, -radius, 0])
-    bottom = len(verts) - 1
-
-    def ring(i, j):
-        return 1 + (i - 1) * n_phi + (j % n_phi)
-
-    faces = []
-    for j in range(n_phi):
-        faces.append([0, ring(1, j + 1), ring(1, j)])
-        faces.append([bottom, ring(n_theta - 1, j), ring(n_theta - 1, j + 1)])
-    for i in range(1, n_theta - 1):
-        for j in range(n_phi):
-            a, b, c, d = ring(i, j), ring(i, j + 1), ring(i + 1, j + 1), ring(i + 1, j)
-            faces += [[a, b, c], [a, c, d]]
-    return _orient_outward(verts, faces)
+    """A closed UV sphere, triangles facing outward, as JSON-ready lists."""
+    v, f = uv_sphere(n_theta, n_phi, radius)
+    return v.tolist(), f.tolist()
 
 
 def furnace_scene(albedo, emission, max_bounces, res=(16, 16), mesh="sphere", spp=64):

@@ -1,7 +1,8 @@
 """The data contract between host and device (kernels/layout.py) and the code's shape.
 
 - No module but the layout indexes a kernel array's columns with an integer literal.
-- ``render_sample`` stays a short loop over named steps (<= 120 lines, nesting <= 5).
+- ``render_sample`` stays a short loop over named steps, and ``render_pixel`` a short loop
+  over samples (<= 120 lines each, nesting <= 5).
 - The one material-parameter table agrees with the loader, the compiler's arrays and
   docs/scene-format.md (names, defaults, ranges).
 """
@@ -95,11 +96,11 @@ def test_no_column_index_literal_outside_the_layout_module():
     assert not offenders, "column numbers outside kernels/layout.py:\n" + "\n".join(offenders)
 
 
-def _render_sample():
+def _integrator_function(name):
     path = os.path.join(ROOT, "pathtracer", "kernels", "integrator.py")
     tree = ast.parse(open(path, encoding="utf-8").read())
     return next(n for n in ast.walk(tree)
-                if isinstance(n, ast.FunctionDef) and n.name == "render_sample")
+                if isinstance(n, ast.FunctionDef) and n.name == name)
 
 
 def _nesting(node, depth=0):
@@ -111,8 +112,9 @@ def _nesting(node, depth=0):
     return deepest
 
 
-def test_render_sample_is_short_and_shallow():
-    fn = _render_sample()
+@pytest.mark.parametrize("name", ["render_sample", "render_pixel"])
+def test_path_is_short_and_shallow(name):
+    fn = _integrator_function(name)
     assert fn.end_lineno - fn.lineno + 1 <= 120
     assert _nesting(fn) <= 5
 

@@ -1,52 +1,138 @@
-"""CUDA backend: one thread per pixel, the scene arrays uploaded once."""
+"""CUDA backend: the shared ``render_pixel`` over a grid of (pixel, sample group) threads.
+
+A pass of ``n`` samples per pixel is split into ``groups`` contiguous ranges of samples, and
+each thread renders one range of one pixel: lanes of a warp work on nearby pixels of the
+same group. One thread per pixel (``groups`` = 1) leaves a small image as one badly
+balanced wave (sky pixels end at once, the object's pixels bounce); with groups the launch
+has enough threads to fill the GPU at any image size, and short ranges end together, so a
+warp waits less for its longest path. Each group sums into its own slice of a scratch film
+and a second kernel adds the slices in a fixed order: the image does not depend on thread
+timing, and each (pixel, sample) uses the same random numbers as on the CPU.
+"""
 import functools
 
 import numpy as np
-from numba import cuda
+from numba import config, cuda
 
 from ..kernels.constants import STACK_SIZE
 from ..kernels.integrator import SceneArrays, make_render_pixel
 
 BLOCK = (16, 8)
+# Threads a launch aims at: several waves of the largest GPUs' resident threads (an H200:
+# 132 SMs x 2,048), so that the blocks that finish late are a small part of the pass.
+TARGET_THREADS = 1 << 23
+# The scratch film holds at most this many (group, pixel) slices of rgb + ray counts.
+MAX_SLICES = 1 << 23
+# Registers per thread: the megakernel wants ~130; capped at 64 (the rest spills to L1)
+# twice as many warps fit on an SM, which hides the latency of the divergent traversal and
+# shading better than the registers save (H100, 2026-11-23: +15-28 % on every benchmark
+# scene; 80 and 96 were in between). bench/gpu_launch.py measures the alternatives.
+MAX_REGISTERS = 64
+# fast="approx": NVVM's approximate division and square root and flushed denormals
+# (ftz=1, prec_div=0, prec_sqrt=0, fma=1) and LLVM's fast-math flags except nnan and ninf:
+# the kernels test for NaN and rely on IEEE infinities (the slab test divides by zero).
+FAST_FLAGS = {"approx": frozenset({"nsz", "arcp", "contract", "afn", "reassoc"})}
 
 
 @functools.lru_cache(maxsize=None)
-def pass_kernel(features):
+def pass_kernel(features, max_registers=None, fast=None):
     render_pixel = make_render_pixel(features, "cuda")
+    fastmath = set(FAST_FLAGS[fast]) if fast else False
 
-    @cuda.jit(cache=True)
+    # Numba's disk cache keys on the kernel's code and closure values, not on the jit
+    # options: the options' own key is read below so that each set is cached apart.
+    options_key = (max_registers or 0) * 16 + (1 + sorted(FAST_FLAGS).index(fast) if fast
+                                                else 0)
+
+    # the simulator runs Python: it takes neither option
+    options = {} if config.ENABLE_CUDASIM else dict(max_registers=max_registers,
+                                                    fastmath=fastmath)
+
+    @cuda.jit(cache=True, **options)
     def render_pass(out, stats, sample_start, n_samples, seed, max_bounces, rr_depth, scene):
+        """Group g = blockIdx.z renders its share of samples [sample_start, + n_samples)
+        into out[g], stats[g]."""
+        if options_key < 0:     # never: makes the options part of the cache key
+            return
         px, py = cuda.grid(2)
-        if px < out.shape[1] and py < out.shape[0]:
+        g = cuda.blockIdx.z
+        groups = cuda.gridDim.z
+        if px < out.shape[2] and py < out.shape[1]:
+            lo = (n_samples * g) // groups
+            hi = (n_samples * (g + 1)) // groups
             stack = cuda.local.array(STACK_SIZE, np.int32)
-            render_pixel(px, py, sample_start, n_samples, seed, max_bounces, rr_depth, scene,
-                         stack, out, stats)
+            render_pixel(px, py, sample_start + lo, hi - lo, seed, max_bounces, rr_depth,
+                         scene, stack, out[g], stats[g])
 
     return render_pass
+
+
+@cuda.jit(cache=True)
+def sum_groups(parts, part_stats, groups, out, stats):
+    """out = parts[0] + parts[1] + ... (in that order), the same for the ray counts."""
+    px, py = cuda.grid(2)
+    if px < out.shape[1] and py < out.shape[0]:
+        for c in range(3):
+            acc = parts[0, py, px, c]
+            n = part_stats[0, py, px, c]
+            for g in range(1, groups):
+                acc += parts[g, py, px, c]
+                n += part_stats[g, py, px, c]
+            out[py, px, c] = acc
+            stats[py, px, c] = n
+
+
+def sample_groups(width, height, n_samples, target_threads=TARGET_THREADS):
+    """How many sample groups a pass of n_samples per pixel is split into."""
+    pixels = width * height
+    want = -(-target_threads // pixels)
+    return max(1, min(n_samples, want, MAX_SLICES // pixels))
 
 
 class CUDABackend:
     name = "cuda"
 
-    def __init__(self, scene, block=BLOCK):
+    def __init__(self, scene, block=BLOCK, max_registers=MAX_REGISTERS, fast="approx",
+                 target_threads=TARGET_THREADS):
         self.scene = scene
         self.block = tuple(block)
-        self.kernel = pass_kernel(scene.features)
+        self.target_threads = target_threads
+        self.kernel = pass_kernel(scene.features, max_registers, fast)
         self.d_scene = SceneArrays(*[cuda.to_device(a) for a in scene.arrays])
-        self.d_out = cuda.device_array((scene.height, scene.width, 3), np.float32)
-        self.d_stats = cuda.device_array((scene.height, scene.width, 3), np.int32)
-        self.out = cuda.pinned_array((scene.height, scene.width, 3), np.float32)
-        self.stats = cuda.pinned_array((scene.height, scene.width, 3), np.int32)
-        self.grid = ((scene.width + self.block[0] - 1) // self.block[0],
-                     (scene.height + self.block[1] - 1) // self.block[1])
+        h, w = scene.height, scene.width
+        self.d_out = cuda.device_array((h, w, 3), np.float32)
+        self.d_stats = cuda.device_array((h, w, 3), np.int32)
+        self._parts = {}     # groups -> scratch film
+        self.out = cuda.pinned_array((h, w, 3), np.float32)
+        self.stats = cuda.pinned_array((h, w, 3), np.int32)
+        self.grid = ((w + self.block[0] - 1) // self.block[0],
+                     (h + self.block[1] - 1) // self.block[1])
 
     def compile(self):
         self.render_pass(0, 0, 0, 0, 0)
 
+    def _scratch(self, groups):
+        if groups == 1:
+            return self.d_out.reshape((1,) + self.d_out.shape), \
+                self.d_stats.reshape((1,) + self.d_stats.shape)
+        if groups not in self._parts:
+            self._parts.clear()    # one size at a time: passes grow, then stay
+            h, w = self.scene.height, self.scene.width
+            self._parts[groups] = (cuda.device_array((groups, h, w, 3), np.float32),
+                                   cuda.device_array((groups, h, w, 3), np.int32))
+        return self._parts[groups]
+
     def launch(self, sample_start, n_samples, seed, max_bounces, rr_depth):
         """Start a pass without waiting (for timing the kernel alone)."""
-        self.kernel[self.grid, self.block](self.d_out, self.d_stats, sample_start, n_samples,
-                                           seed, max_bounces, rr_depth, self.d_scene)
+        groups = sample_groups(self.scene.width, self.scene.height, n_samples,
+                               self.target_threads)
+        parts, part_stats = self._scratch(groups)
+        self.kernel[self.grid + (groups,), self.block](
+            parts, part_stats, sample_start, n_samples, seed, max_bounces, rr_depth,
+            self.d_scene)
+        if groups > 1:
+            sum_groups[self.grid, self.block](parts, part_stats, groups, self.d_out,
+                                              self.d_stats)
 
     def render_pass(self, sample_start, n_samples, seed, max_bounces, rr_depth):
         self.launch(sample_start, n_samples, seed, max_bounces, rr_depth)
@@ -57,3 +143,7 @@ class CUDABackend:
     def ptx(self):
         """PTX of the compiled pass kernel (to check for float64 instructions)."""
         return "\n".join(self.kernel.inspect_asm().values())
+
+    def registers(self):
+        """Registers per thread of the compiled pass kernel(s)."""
+        return {str(k): v for k, v in self.kernel.get_regs_per_thread().items()}

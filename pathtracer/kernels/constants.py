@@ -40,5 +40,12 @@ BIG = F32(1e30)
 # Russian roulette never continues with more than this probability (as Mitsuba's `path`).
 RR_MAX = F32(0.95)
 
+# Luminance of linear sRGB / Rec. 709 RGB: the coefficients Mitsuba 3 uses (its
+# ``luminance()``), so that texture-driven scalars, the principled BSDF's tints and the
+# environment's sampling density all weigh colours the same way.
+LUM_R = F32(0.212671)
+LUM_G = F32(0.715160)
+LUM_B = F32(0.072169)
+
 # Traversal stack depth; the BVH builder caps tree depth below this.
 STACK_SIZE = 64

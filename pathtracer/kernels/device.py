@@ -28,3 +28,10 @@ def step_marker(target):
     if target == "cpu":
         return register_jitable(inline="always")
     return register_jitable
+
+
+def entry_marker(target):
+    """The marker of the per-pixel and per-sample functions that the backends call."""
+    if target == "cpu":
+        return register_jitable(_nrt=False)
+    return register_jitable

@@ -5,19 +5,23 @@ Every light kind (HDRI environment, emissive triangle, point light) is sampled t
 function, :func:`sample_emitter` of ``make_emitters(features)``, that returns the same
 record (as Mitsuba 3's ``Emitter::sample_direction`` and pbrt-v4's ``SampleLd`` do):
 
-    (wi, t_max, pdf_light, is_delta, light_tri, index, lu, lv)
+    (wi, t_max, radiance, pdf_light, is_delta, light_tri)
 
 ``wi`` the unit direction from the shading point, ``t_max`` how far a shadow ray must be
-clear (INF for the environment), ``pdf_light`` the solid-angle density of ``wi``, selection
+clear (INF for the environment), ``radiance`` the emitted radiance (for a point light, the
+intensity) arriving along ``wi``, ``pdf_light`` the solid-angle density of ``wi``, selection
 included (for a point light the pmf times distance squared, so that radiance / pdf_light is
 the irradiance term), ``is_delta`` whether MIS against BSDF sampling is impossible (point
-lights), ``light_tri`` the light's triangle, which the shadow ray must not hit (-1 when
-none), and what :func:`emitter_radiance` needs to evaluate the radiance arriving along
-``wi``: the triangle's material or the point light (``index``) and the sample's texture
-coordinates. ``pdf_light`` = 0 means no sample. The radiance is evaluated only once the
-shadow ray found the light visible: an environment lookup (two inverse trigonometric
-functions and a bilinear filter) for every occluded sample cost 13% on the CPU and 12% on
-an H100 in the bunny-studio scene.
+lights) and ``light_tri`` the light's triangle, which the shadow ray must not hit (-1 when
+none). ``pdf_light`` = 0 means no sample.
+
+The environment's radiance is left out of the record (zero): :func:`environment_radiance`
+evaluates it once the shadow ray found the sky visible, because that lookup (two inverse
+trigonometric functions and a bilinear filter) for every occluded sample cost 12% on an
+H100 in the bunny-studio scene. The other kinds' radiance is a table lookup, and a record
+that carried what a later evaluation needs instead (material, texture coordinates) made the
+CPU kernel 1.5x slower on the Cornell box (LLVM kept more of the path state live across the
+shadow ray's traversal; measured with ``python -m bench.ab``, 2026-11-23).
 """
 import functools
 from typing import NamedTuple
@@ -47,7 +51,7 @@ def mis_weight_hit(pdf_prev, pdf_light):
 
 class EmitterSteps(NamedTuple):
     sample_emitter: object
-    emitter_radiance: object
+    environment_radiance: object
     hit_emission: object
     escaped: object
 
@@ -71,11 +75,12 @@ def make_emitters(features, target="cpu"):
     def sample_environment(env_marg, env_cond, env_pdf_arr, env_info, u1, u2):
         wi, pdf_dir = env_sample(env_marg, env_cond, env_pdf_arr, env_info, u1, u2)
         if not (pdf_dir > ZERO):
-            return wi, INF, ZERO, False, -1, -1, ZERO, ZERO
-        return wi, INF, env_info[ENV_P_SELECT] * pdf_dir, False, -1, -1, ZERO, ZERO
+            return wi, INF, NO_RADIANCE, ZERO, False, -1
+        return wi, INF, NO_RADIANCE, env_info[ENV_P_SELECT] * pdf_dir, False, -1
 
     @step
-    def sample_triangle_light(tri_v, tri_mat, tri_uv, tri_light_pdf, mat, ref, p, u1, u2):
+    def sample_triangle_light(tri_v, tri_mat, tri_uv, tri_light_pdf, mat, mat_tex, tex_data,
+                              tex_int, tex_f, ref, p, u1, u2):
         q, nl, _ = sample_triangle_point(tri_v, ref, u1, u2)
         wi, dist = direction_to(p, q)
         cos_l = -dot(nl, wi)
@@ -84,23 +89,25 @@ def make_emitters(features, target="cpu"):
         # zero-area triangles)
         pdf_area = tri_light_pdf[ref]
         if not (dist > ZERO and pdf_area > ZERO and emits(mat, lm, cos_l)):
-            return wi, ZERO, ZERO, False, -1, -1, ZERO, ZERO
+            return wi, ZERO, NO_RADIANCE, ZERO, False, -1
         lu, lv = ZERO, ZERO
         if TEXTURES:
             # texture coordinates of the sampled point, from the sampler's barycentrics
             lb1, lb2 = square_to_triangle(u1, u2)
             lu, lv = tri_uv_at(tri_uv, ref, lb1, lb2)
-        return (wi, dist * SHADOW_SHORTEN, pdf_area * dist * dist / abs(cos_l), False, ref,
-                lm, lu, lv)
+        return (wi, dist * SHADOW_SHORTEN, emitted(mat, mat_tex, tex_data, tex_int, tex_f, lm,
+                                                   lu, lv),
+                pdf_area * dist * dist / abs(cos_l), False, ref)
 
     @step
     def sample_point_light(point_lights, pmf, ref, p):
         pl = point_light_index(ref)
         wi, dist = direction_to(p, load3(point_lights, pl, PL_POSITION))
         if not (dist > ZERO):
-            return wi, ZERO, ZERO, True, -1, pl, ZERO, ZERO
-        # a delta light: intensity / pdf_light = intensity / (pmf * dist^2)
-        return wi, dist * SHADOW_SHORTEN, pmf * dist * dist, True, -1, pl, ZERO, ZERO
+            return wi, ZERO, NO_RADIANCE, ZERO, True, -1
+        # a delta light: radiance / pdf_light = intensity / (pmf * dist^2)
+        return (wi, dist * SHADOW_SHORTEN, load3(point_lights, pl, PL_INTENSITY),
+                pmf * dist * dist, True, -1)
 
     @step
     def sample_emitter(scene, p, u_sel, u1, u2):
@@ -118,30 +125,25 @@ def make_emitters(features, target="cpu"):
             ref = scene.light_ref[k]
             if TRI_LIGHTS:
                 if ref >= 0:
-                    return sample_triangle_light(scene.tri_v, scene.tri_mat, scene.tri_uv,
-                                                 scene.tri_light_pdf, scene.mat, ref, p, u1,
-                                                 u2)
+                    return sample_triangle_light(
+                        scene.tri_v, scene.tri_mat, scene.tri_uv, scene.tri_light_pdf,
+                        scene.mat, scene.mat_tex, scene.tex_data, scene.tex_int, scene.tex_f,
+                        ref, p, u1, u2)
             if POINT_LIGHTS:
                 pmf = scene.light_cdf[k + 1] - scene.light_cdf[k]
                 if ENV_MAP:
                     pmf *= ONE - scene.env_info[ENV_P_SELECT]
                 return sample_point_light(scene.point_lights, pmf, ref, p)
-        return (ZERO, ZERO, ONE), ZERO, ZERO, False, -1, -1, ZERO, ZERO
+        return (ZERO, ZERO, ONE), ZERO, NO_RADIANCE, ZERO, False, -1
 
     @step
-    def emitter_radiance(scene, wi, is_delta, light_tri, index, lu, lv):
-        """Radiance (for a point light: intensity) arriving along wi from the emitter of a
-        sample_emitter record."""
-        if TRI_LIGHTS:
-            if light_tri >= 0:
-                return emitted(scene.mat, scene.mat_tex, scene.tex_data, scene.tex_int,
-                               scene.tex_f, index, lu, lv)
-        if POINT_LIGHTS:
-            if is_delta:
-                return load3(scene.point_lights, index, PL_INTENSITY)
+    def environment_radiance(env_img, env_info, wi, le, is_delta, light_tri):
+        """The record's radiance, with the environment's looked up now (see the module's
+        docstring): a sample of neither a triangle nor a point light is the environment's."""
         if ENV_MAP:
-            return env_eval(scene.env_img, scene.env_info, wi)
-        return NO_RADIANCE
+            if light_tri < 0 and not is_delta:
+                return env_eval(env_img, env_info, wi)
+        return le
 
     @step
     def hit_emission(mat, mat_tex, tex_data, tex_int, tex_f, tri_light_pdf, tri, m, cos_o, t,
@@ -169,4 +171,4 @@ def make_emitters(features, target="cpu"):
             return (env[0], env[1], env[2]), ONE
         return NO_RADIANCE, ZERO
 
-    return EmitterSteps(sample_emitter, emitter_radiance, hit_emission, escaped)
+    return EmitterSteps(sample_emitter, environment_radiance, hit_emission, escaped)

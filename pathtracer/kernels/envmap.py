@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from .constants import HALF, ONE, PI, TWO_PI, ZERO
+from .constants import HALF, LUM_B, LUM_G, LUM_R, ONE, PI, TWO_PI, ZERO
 from .device import device
 from .layout import ENV_COS_ROT, ENV_SIN_ROT
 from .lights import sample_discrete
@@ -135,7 +135,7 @@ def environment_tables(img):
     host: the piecewise-constant 2-D distribution that :func:`env_sample` draws from and
     :func:`env_pdf` evaluates."""
     h, w = img.shape[:2]
-    lum = img @ np.array([0.2126, 0.7152, 0.0722])
+    lum = img @ np.array([LUM_R, LUM_G, LUM_B], np.float64)
     # mean of the bilinear reconstruction over each cell: [1, 6, 1] / 8 in u (wrapping)
     # and v (clamped), so a cell is never given zero weight where the lookup is not zero
     k = (np.roll(lum, 1, axis=1) + 6 * lum + np.roll(lum, -1, axis=1)) / 8

@@ -26,7 +26,7 @@ import numpy as np
 
 from .camera import pinhole_ray, thin_lens_ray
 from .constants import INF, ONE, RR_MAX, ZERO
-from .device import device, step_marker
+from .device import device, entry_marker, step_marker
 from .emitters import make_emitters
 from .layout import (D_BSDF_LOBE, D_BSDF_U, D_BSDF_V, D_FIRST_BOUNCE, D_LENS_U, D_LENS_V,
                      D_LIGHT_SELECT, D_LIGHT_U, D_LIGHT_V, D_PIXEL_X, D_PIXEL_Y, D_RR,
@@ -63,6 +63,7 @@ def make_render_pixel(features, target="cpu"):
     """Compile-time specialisation: returns ``render_pixel`` for scenes with ``features``."""
     S = specialise(features)
     step = step_marker(target)
+    entry = entry_marker(target)
     THIN_LENS = S.thin_lens
     TRI_LIGHTS = S.tri_lights
     ANY_ENVIRONMENT = S.any_environment
@@ -74,8 +75,8 @@ def make_render_pixel(features, target="cpu"):
         surface.tri_uv_at, surface.material_at, surface.shading_frame, surface.ray_origin)
     local_wo, eval_world, sample_world, leave = (
         scatter.local_wo, scatter.eval_world, scatter.sample_world, scatter.leave)
-    sample_emitter, emitter_radiance, hit_emission, escaped = (
-        emitters.sample_emitter, emitters.emitter_radiance, emitters.hit_emission,
+    sample_emitter, environment_radiance, hit_emission, escaped = (
+        emitters.sample_emitter, emitters.environment_radiance, emitters.hit_emission,
         emitters.escaped)
 
     @step
@@ -91,25 +92,25 @@ def make_render_pixel(features, target="cpu"):
 
     @step
     def direct_light(beta, is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, p,
-                     origin, tri, wi, t_max, pdf_light, is_delta, light_tri, index, lu, lv,
-                     scene, stack):
+                     origin, tri, wi, t_max, le, pdf_light, is_delta, light_tri, tri_v,
+                     bvh_box, bvh_child, env_img, env_info, stack):
         """The one shadow-ray-and-MIS tail of next-event estimation, for every emitter
         kind (a sample_emitter record): (radiance added, shadow rays traced)."""
         f, pdf_bsdf = eval_world(is_principled, params, wo, wo_l, wi, tangent, bitangent, ns,
                                  ng)
         if not (max_comp(f) > ZERO):
             return (ZERO, ZERO, ZERO), 0
-        if any_hit(leave(p, ng, wi, origin), wi, t_max, tri, light_tri, scene.tri_v,
-                   scene.bvh_box, scene.bvh_child, stack):
+        if any_hit(leave(p, ng, wi, origin), wi, t_max, tri, light_tri, tri_v, bvh_box,
+                   bvh_child, stack):
             return (ZERO, ZERO, ZERO), 1
-        le = emitter_radiance(scene, wi, is_delta, light_tri, index, lu, lv)
+        le = environment_radiance(env_img, env_info, wi, le, is_delta, light_tri)
         if is_delta:
             weight = ONE / pdf_light
         else:
             weight = power_heuristic(pdf_light, pdf_bsdf) / pdf_light
         return scale(mul(mul(beta, f), le), weight), 1
 
-    @device
+    @entry
     def render_sample(px, py, sample_index, seed, width, height, max_bounces, rr_depth,
                       scene, stack):
         """Radiance (r, g, b) of one camera path through pixel (px, py), with the number of
@@ -160,14 +161,15 @@ def make_render_pixel(features, target="cpu"):
             dim = D_FIRST_BOUNCE + bounce * DIMS_PER_BOUNCE
             # ---- next-event estimation: one emitter sample, one shadow ray ----
             if NEE:
-                wi, t_max, pdf_light, is_delta, light_tri, index, lu, lv = sample_emitter(
+                wi, t_max, le, pdf_light, is_delta, light_tri = sample_emitter(
                     scene, p, sample_1d(key, dim + D_LIGHT_SELECT),
                     sample_1d(key, dim + D_LIGHT_U), sample_1d(key, dim + D_LIGHT_V))
                 if pdf_light > ZERO:
                     contribution, traced = direct_light(
                         beta, is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, p,
-                        origin, tri, wi, t_max, pdf_light, is_delta, light_tri, index, lu, lv,
-                        scene, stack)
+                        origin, tri, wi, t_max, le, pdf_light, is_delta, light_tri,
+                        scene.tri_v, scene.bvh_box, scene.bvh_child, scene.env_img,
+                        scene.env_info, stack)
                     radiance = add(radiance, contribution)
                     n_shadow_rays += traced
             # ---- BSDF sampling: the next ray ----
@@ -189,12 +191,18 @@ def make_render_pixel(features, target="cpu"):
                 break
         return radiance[0], radiance[1], radiance[2], n_bounce_rays, n_shadow_rays
 
-    @device
+    @entry
     def render_pixel(px, py, sample_start, n_samples, seed, max_bounces, rr_depth, scene,
                      stack, out, stats):
         """Add n_samples paths of pixel (px, py) to out[py, px] (float32 rgb sums) and
         count rays and non-finite samples in stats[py, px] (layout STAT_*). Non-finite
-        samples are not dropped: they are counted and reach the image."""
+        samples are not dropped: they are counted and reach the image.
+
+        One path after the other. Path regeneration (one loop over the vertices of all the
+        samples, so that a GPU lane whose path ended starts its next sample at once; Novak
+        et al. 2010) was measured on an H100 (2026-11-23, bench/gpu_launch.py): +9 % on the
+        Cornell box but -6 to -9 % on the HDRI scenes, so it is not used; a path step
+        function called in the loop cost 4-5 % on the GPU against the body written out."""
         height = out.shape[0]
         width = out.shape[1]
         r = ZERO

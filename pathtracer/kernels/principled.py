@@ -34,7 +34,7 @@ from .device import device
 from .layout import (P_ANISOTROPIC, P_BASE, P_CLEARCOAT, P_CLEARCOAT_GLOSS, P_ETA, P_FLATNESS,
                      P_METALLIC, P_ROUGHNESS, P_SHEEN, P_SHEEN_TINT, P_SPEC_TINT,
                      P_TRANSMISSION)
-from .vec import dot, normalize
+from .vec import dot, luminance, normalize
 from .warps import square_to_cosine_hemisphere, square_to_disk_concentric
 
 
@@ -48,9 +48,6 @@ CC_MASK_ALPHA = np.float32(0.25)
 ANISO_K = np.float32(0.9)
 SS_K = np.float32(1.25)
 F0_CLEARCOAT = np.float32(0.04)
-LUM_R = np.float32(0.212671)
-LUM_G = np.float32(0.715160)
-LUM_B = np.float32(0.072169)
 PI = np.float32(np.pi)
 
 
@@ -213,11 +210,6 @@ def mac_mic_compatible(m, wo, wi, cos_o, reflection):
 
 
 @device
-def lum(r, g, b):
-    return LUM_R * r + LUM_G * g + LUM_B * b
-
-
-@device
 def principled_eval(params, wo, wi):
     """(f(wo, wi) |cos theta_i| as rgb, pdf of principled_sample producing wi)."""
     base_r = params[P_BASE]
@@ -264,7 +256,7 @@ def principled_eval(params, wo, wi):
         # Principled Fresnel (Mitsuba's principled_fresnel): true dielectric Fresnel,
         # blended with Schlick terms for the metallic and the tinted dielectric parts.
         if front:
-            l = lum(base_r, base_g, base_b)
+            l = luminance(base_r, base_g, base_b)
             tr = base_r / l if l > ZERO else ONE
             tg = base_g / l if l > ZERO else ONE
             tb = base_b / l if l > ZERO else ONE
@@ -325,7 +317,7 @@ def principled_eval(params, wo, wi):
             vb += c * base_b
         if sheen > ZERO and metallic < ONE:
             fd = schlick_weight(abs(cos_d))
-            l = lum(base_r, base_g, base_b)
+            l = luminance(base_r, base_g, base_b)
             tr = base_r / l if l > ZERO else ONE
             tg = base_g / l if l > ZERO else ONE
             tb = base_b / l if l > ZERO else ONE

@@ -121,6 +121,7 @@ def make_scatter(features, target="cpu"):
         if not (pdf_bsdf > ZERO):
             return wi_l, weight, ZERO
         wi = to_world(wi_l, t, s, n)   # unit: orthonormal frame
+        folded = False
         if LEAN:
             if dot(ng, wi) <= ZERO:
                 return wi, weight, ZERO
@@ -128,11 +129,19 @@ def make_scatter(features, target="cpu"):
             if not FOLD:
                 return wi, weight, ZERO   # the shading frame and the surface disagree
             wi = mirror(wi, ng)
+            folded = True
         if FOLD:
-            f, pdf_bsdf = eval_world(is_principled, params, wo, wo_l, wi, t, s, n, ng)
-            if not (pdf_bsdf > ZERO):
-                return wi, weight, ZERO
-            weight = scale(f, ONE / pdf_bsdf)
+            # The sample's own f / pdf is the effective one unless wi was folded or its
+            # mirror image is on the wrong side (then eval_world adds that part): the
+            # usual case needs no second BSDF evaluation.
+            if not folded:
+                wm = mirror(wi, ng)
+                folded = not consistent(wo, wo_l, wm, to_local(wm, t, s, n), ng)
+            if folded:
+                f, pdf_bsdf = eval_world(is_principled, params, wo, wo_l, wi, t, s, n, ng)
+                if not (pdf_bsdf > ZERO):
+                    return wi, weight, ZERO
+                weight = scale(f, ONE / pdf_bsdf)
         return wi, weight, pdf_bsdf
 
     @step

@@ -20,9 +20,9 @@ from .layout import (M_ALBEDO, M_ANISOTROPIC, M_CLEARCOAT, M_CLEARCOAT_GLOSS, M_
                      T_SHEEN_TINT, T_SPEC_TINT, T_SPECULAR, T_SUBSURFACE, T_TRANSMISSION,
                      TRI_N0, TRI_N1, TRI_N2, TRI_T0, TRI_T1, TRI_T2, TRI_T_SIGN, TRI_UV0,
                      TRI_UV1, TRI_UV2, specialise)
-from .principled import lum
 from .textures import tex_lookup
-from .vec import add, cross, dot, frame, load3, madd, max_abs, neg, normalize, scale
+from .vec import (add, cross, dot, frame, load3, luminance, madd, max_abs, neg, normalize,
+                  scale)
 
 ETA_MIN_TRANSMISSIVE = np.float32(1.001)   # eta = 1 is no interface (as Mitsuba)
 SPEC_K = np.float32(0.08)                  # F0 = SPEC_K * specular (Burley 2012)
@@ -105,7 +105,7 @@ def make_surface(features, target="cpu"):
             t = mat_tex[m, slot]
             if t >= 0:
                 r, g, b = tex_lookup(tex_data, tex_int, tex_f, t, u, v)
-                return lum(r, g, b)
+                return luminance(r, g, b)
         return mat[m, col]
 
     @step

@@ -1,9 +1,8 @@
 """3-vectors as tuples of float32, and orthonormal frames."""
 import math
 
-import numpy as np
 
-from .constants import ONE, ZERO
+from .constants import LUM_B, LUM_G, LUM_R, ONE, ZERO
 from .device import device
 
 
@@ -103,7 +102,6 @@ def to_world(v, t, s, n):
 
 
 @device
-def luminance(c):
-    """Rec. 709 luminance of linear RGB."""
-    return (np.float32(0.2126) * c[0] + np.float32(0.7152) * c[1]
-            + np.float32(0.0722) * c[2])
+def luminance(r, g, b):
+    """Luminance of linear RGB (constants.LUM_*)."""
+    return LUM_R * r + LUM_G * g + LUM_B * b

@@ -51,3 +51,51 @@ def safe_normalize(n, fallback):
     length = np.linalg.norm(n, axis=-1, keepdims=True)
     ok = length > 0
     return np.where(ok, n / np.where(ok, length, 1.0), fallback)
+
+
+def uv_sphere(n_theta, n_phi, radius=1.0, seam=False):
+    """A UV sphere centred at the origin, triangles counter-clockwise seen from outside.
+
+    ``seam=False``: a closed mesh, one vertex at each pole and ``n_phi`` on each of the
+    ``n_theta - 1`` rings; returns (vertices (V, 3), faces (F, 3) int). ``seam=True``: a
+    grid of (n_theta + 1) x (n_phi + 1) vertices whose first and last columns coincide (the
+    texture seam) and whose pole rows repeat the pole, with texture coordinates u = phi /
+    2 pi, v = 1 - theta / pi; returns (vertices, faces, uvs (V, 2)). Unit normals are
+    vertices / radius. theta is measured from +y, phi from +x towards -z."""
+    if seam:
+        t = np.pi * np.arange(n_theta + 1) / n_theta
+        p = 2 * np.pi * np.arange(n_phi + 1) / n_phi
+        tt, pp = np.meshgrid(t, p, indexing="ij")
+        unit = np.stack([np.sin(tt) * np.cos(pp), np.cos(tt), -np.sin(tt) * np.sin(pp)], -1)
+        uvs = np.stack([pp / (2 * np.pi), 1 - tt / np.pi], -1).reshape(-1, 2)
+        faces = []
+        for i in range(n_theta):
+            for j in range(n_phi):
+                a = i * (n_phi + 1) + j
+                b, c, d = a + 1, a + n_phi + 1, a + n_phi + 2
+                if i > 0:                       # the pole rows' first triangles are empty
+                    faces.append((a, c, b))
+                if i < n_theta - 1:
+                    faces.append((b, c, d))
+        return radius * unit.reshape(-1, 3), np.array(faces, np.int64), uvs
+    verts = [(0.0, 1.0, 0.0)]
+    for i in range(1, n_theta):
+        t = np.pi * i / n_theta
+        for j in range(n_phi):
+            p = 2 * np.pi * j / n_phi
+            verts.append((np.sin(t) * np.cos(p), np.cos(t), -np.sin(t) * np.sin(p)))
+    verts.append((0.0, -1.0, 0.0))
+    bottom = len(verts) - 1
+
+    def ring(i, j):
+        return 1 + (i - 1) * n_phi + (j % n_phi)
+
+    faces = []
+    for j in range(n_phi):
+        faces.append((0, ring(1, j), ring(1, j + 1)))
+        faces.append((bottom, ring(n_theta - 1, j + 1), ring(n_theta - 1, j)))
+    for i in range(1, n_theta - 1):
+        for j in range(n_phi):
+            a, b, c, d = ring(i, j), ring(i, j + 1), ring(i + 1, j), ring(i + 1, j + 1)
+            faces += [(a, c, b), (b, c, d)]
+    return radius * np.array(verts), np.array(faces, np.int64)

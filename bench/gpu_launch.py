@@ -1,0 +1,126 @@
+"""GPU kernel variants measured side by side: launch geometry, register cap, fast arithmetic.
+
+    python -m bench.gpu_launch [--scenes ...] [--variants base,groups,...] [--json F]
+
+Every variant renders the same scene descriptions (``bench.ab``'s) at the issue's launch
+sizes; a figure is the median of ``--repeats`` passes after a warm-up pass (compile time
+apart), in camera paths/s. ``registers`` is the pass kernel's count from the CUDA driver.
+Optionally Mitsuba 3 (``cuda_ad_rgb``) renders the same scenes at the same sizes and spp in
+the same process, for ratios at equal launch sizes.
+"""
+import argparse
+import json
+import sys
+import time
+
+from bench.ab import _describe
+
+# scene -> [(resolution, spp per pass)]
+SIZES = {
+    "cornell-box": [((1024, 1024), 64)],
+    "bunny-studio": [((256, 192), 64), ((1024, 768), 16)],
+    "sun": [((256, 192), 64), ((1024, 768), 16)],
+}
+
+# name -> CUDABackend options
+VARIANTS = {
+    "pixel-exact": dict(target_threads=1, max_registers=None, fast=None),   # 2026-11-22's
+    "groups-exact": dict(max_registers=None, fast=None),
+    "groups-r64": dict(fast=None),
+    "groups-fast": dict(max_registers=None),
+    "default": dict(),                              # groups, 64 registers, approx
+    "r48": dict(max_registers=48),
+    "r56": dict(max_registers=56),
+    "r72": dict(max_registers=72),
+    "b32x4": dict(block=(32, 4)),
+    "b8x8": dict(block=(8, 8)),
+    "b16x16": dict(block=(16, 16)),
+    "t2^19": dict(target_threads=1 << 19),
+    "t2^20": dict(target_threads=1 << 20),
+    "t2^21": dict(target_threads=1 << 21),
+    "t2^22": dict(target_threads=1 << 22),
+    "t2^23": dict(target_threads=1 << 23),
+}
+
+
+def time_ours(scene, options, spp, repeats):
+    from numba import cuda
+
+    from bench.common import median_time
+    from pathtracer.backends.cuda import CUDABackend
+    b = CUDABackend(scene, **options)
+    t0 = time.perf_counter()
+    b.compile()
+    compile_s = time.perf_counter() - t0
+    mb, rr = scene.max_bounces, scene.rr_depth
+    start = [0]
+
+    def one():
+        b.launch(start[0], spp, 0, mb, rr)
+        cuda.synchronize()
+        start[0] += spp
+
+    one()
+    t, times = median_time(one, repeats)
+    regs = list(b.registers().values())
+    return {"pass_s": times, "paths_per_s": scene.width * scene.height * spp / t,
+            "compile_s": compile_s, "registers": regs[0] if regs else None}
+
+
+def time_mitsuba(name, desc, spp, repeats):
+    import mitsuba as mi
+
+    from bench.common import mitsuba_cornell, mitsuba_pass_times
+    from pathtracer.mitsuba import mitsuba_dict
+    mi.set_variant("cuda_ad_rgb")
+    w, h = desc.camera.resolution
+    if name == "cornell-box":
+        scene = mitsuba_cornell(w, h, spp)
+    else:
+        scene = mi.load_dict(mitsuba_dict(desc))
+    _, t, times = mitsuba_pass_times(scene, spp, repeats)
+    return {"pass_s": times, "paths_per_s": w * h * spp / t}
+
+
+def main(argv=None):
+    from bench.common import command, machine, now, versions
+    from pathtracer.scene import compile_scene
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--scenes", nargs="*", default=list(SIZES))
+    p.add_argument("--variants", default="pixel-exact,default")
+    p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--mitsuba", action="store_true")
+    p.add_argument("--json")
+    a = p.parse_args(argv)
+    rec = {"command": command(), "machine": machine(), "date": now(), "versions": versions(),
+           "results": []}
+    for name in a.scenes:
+        for res, spp in SIZES[name]:
+            desc = _describe(name, res)
+            scene = compile_scene(desc)
+            row = {}
+            for v in a.variants.split(","):
+                got = time_ours(scene, VARIANTS[v], spp, a.repeats)
+                rec["results"].append(dict(scene=name, resolution=res, spp=spp, variant=v,
+                                           **got))
+                row[v] = got["paths_per_s"]
+                print(f"{name:13s} {res[0]}x{res[1]} x{spp:3d} {v:16s} "
+                      f"{got['paths_per_s'] / 1e6:8.1f} M paths/s  regs {got['registers']}  "
+                      f"compile {got['compile_s']:.1f} s", flush=True)
+            if a.mitsuba:
+                try:
+                    got = time_mitsuba(name, desc, spp, a.repeats)
+                except Exception as e:     # noqa: BLE001  (a scene Mitsuba cannot express)
+                    print(f"{name}: Mitsuba: {e}", file=sys.stderr)
+                else:
+                    rec["results"].append(dict(scene=name, resolution=res, spp=spp,
+                                               variant="mitsuba cuda_ad_rgb", **got))
+                    print(f"{name:13s} {res[0]}x{res[1]} x{spp:3d} {'Mitsuba':16s} "
+                          f"{got['paths_per_s'] / 1e6:8.1f} M paths/s", flush=True)
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump(rec, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()
