@@ -29,6 +29,7 @@ from .constants import HALF, LUM_B, LUM_G, LUM_R, ONE, PI, TWO_PI, ZERO
 from .device import device
 from .layout import ENV_COS_ROT, ENV_SIN_ROT
 from .lights import sample_discrete
+from .textures import bilinear_blend, bilinear_cell
 from .warps import sincos
 
 INV_TWO_PI = np.float32(1.0 / (2.0 * np.pi))
@@ -55,33 +56,21 @@ def env_eval(env_img, env_info, d):
     h = env_img.shape[0]
     w = env_img.shape[1]
     u, v, _ = env_uv(env_info, d)
-    x = u * np.float32(w) - HALF      # float32 sizes: int * float32 promotes to float64
-    y = v * np.float32(h) - HALF
-    ix = int(math.floor(x))
-    iy = int(math.floor(y))
-    fx = x - np.float32(ix)
-    fy = y - np.float32(iy)
+    # float32 sizes: int * float32 would promote to float64
+    ix, iy, fx, fy = bilinear_cell(u * np.float32(w), v * np.float32(h))
     i0 = ix % w
     if i0 < 0:
         i0 += w
     i1 = i0 + 1
     if i1 >= w:
         i1 = 0
-    j0 = iy
-    j1 = j0 + 1
-    j0 = min(max(j0, 0), h - 1)
-    j1 = min(max(j1, 0), h - 1)
-    w00 = (ONE - fx) * (ONE - fy)
-    w10 = fx * (ONE - fy)
-    w01 = (ONE - fx) * fy
-    w11 = fx * fy
-    r = (env_img[j0, i0, 0] * w00 + env_img[j0, i1, 0] * w10 + env_img[j1, i0, 0] * w01 +
-         env_img[j1, i1, 0] * w11)
-    g = (env_img[j0, i0, 1] * w00 + env_img[j0, i1, 1] * w10 + env_img[j1, i0, 1] * w01 +
-         env_img[j1, i1, 1] * w11)
-    b = (env_img[j0, i0, 2] * w00 + env_img[j0, i1, 2] * w10 + env_img[j1, i0, 2] * w01 +
-         env_img[j1, i1, 2] * w11)
-    return r, g, b
+    j0 = min(max(iy, 0), h - 1)
+    j1 = min(max(iy + 1, 0), h - 1)
+    return bilinear_blend(
+        (env_img[j0, i0, 0], env_img[j0, i0, 1], env_img[j0, i0, 2]),
+        (env_img[j0, i1, 0], env_img[j0, i1, 1], env_img[j0, i1, 2]),
+        (env_img[j1, i0, 0], env_img[j1, i0, 1], env_img[j1, i0, 2]),
+        (env_img[j1, i1, 0], env_img[j1, i1, 1], env_img[j1, i1, 2]), fx, fy)
 
 
 @device

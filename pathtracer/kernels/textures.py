@@ -30,6 +30,30 @@ def texel(tex_data, base, width, i, j):
 
 
 @device
+def bilinear_cell(x, y):
+    """The texel (ix, iy) whose centre is at or below-left of image position (x, y), in
+    texel units with centres at half-integers, and the fractions (fx, fy) towards the next."""
+    x -= HALF
+    y -= HALF
+    ix = int(math.floor(x))
+    iy = int(math.floor(y))
+    return ix, iy, x - np.float32(ix), y - np.float32(iy)
+
+
+@device
+def bilinear_blend(a, b, c, d, fx, fy):
+    """Bilinear mix of rgb texels a (ix, iy), b (ix + 1, iy), c (ix, iy + 1), d (ix + 1,
+    iy + 1). The one bilinear filter: textures and the environment map use it."""
+    w00 = (ONE - fx) * (ONE - fy)
+    w10 = fx * (ONE - fy)
+    w01 = (ONE - fx) * fy
+    w11 = fx * fy
+    return (a[0] * w00 + b[0] * w10 + c[0] * w01 + d[0] * w11,
+            a[1] * w00 + b[1] * w10 + c[1] * w01 + d[1] * w11,
+            a[2] * w00 + b[2] * w10 + c[2] * w01 + d[2] * w11)
+
+
+@device
 def tex_lookup(tex_data, tex_int, tex_f, t, u, v):
     """Filtered, scaled rgb value of texture t at texture coordinates (u, v)."""
     base = tex_int[t, TEX_FIRST]
@@ -44,25 +68,13 @@ def tex_lookup(tex_data, tex_int, tex_f, t, u, v):
         r, g, b = texel(tex_data, base, w, wrap(int(math.floor(x)), w),
                         wrap(int(math.floor(y)), h))
     else:
-        x -= HALF
-        y -= HALF
-        ix = int(math.floor(x))
-        iy = int(math.floor(y))
-        fx = x - np.float32(ix)
-        fy = y - np.float32(iy)
+        ix, iy, fx, fy = bilinear_cell(x, y)
         i0 = wrap(ix, w)
         j0 = wrap(iy, h)
         i1 = wrap(i0 + 1, w)
         j1 = wrap(j0 + 1, h)
-        a = texel(tex_data, base, w, i0, j0)
-        b_ = texel(tex_data, base, w, i1, j0)
-        c = texel(tex_data, base, w, i0, j1)
-        d = texel(tex_data, base, w, i1, j1)
-        w00 = (ONE - fx) * (ONE - fy)
-        w10 = fx * (ONE - fy)
-        w01 = (ONE - fx) * fy
-        w11 = fx * fy
-        r = a[0] * w00 + b_[0] * w10 + c[0] * w01 + d[0] * w11
-        g = a[1] * w00 + b_[1] * w10 + c[1] * w01 + d[1] * w11
-        b = a[2] * w00 + b_[2] * w10 + c[2] * w01 + d[2] * w11
+        r, g, b = bilinear_blend(texel(tex_data, base, w, i0, j0),
+                                 texel(tex_data, base, w, i1, j0),
+                                 texel(tex_data, base, w, i0, j1),
+                                 texel(tex_data, base, w, i1, j1), fx, fy)
     return r * tex_f[t, TEX_SCALE], g * tex_f[t, TEX_SCALE + 1], b * tex_f[t, TEX_SCALE + 2]
