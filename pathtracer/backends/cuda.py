@@ -102,25 +102,31 @@ class CUDABackend:
         h, w = scene.height, scene.width
         self.d_out = cuda.device_array((h, w, 3), np.float32)
         self.d_stats = cuda.device_array((h, w, 3), np.int32)
-        self._parts = {}     # groups -> scratch film
+        self._parts = None   # scratch film (float sums, ray counts), see _scratch
         self.out = cuda.pinned_array((h, w, 3), np.float32)
         self.stats = cuda.pinned_array((h, w, 3), np.int32)
         self.grid = ((w + self.block[0] - 1) // self.block[0],
                      (h + self.block[1] - 1) // self.block[1])
 
     def compile(self):
+        """Compile (or load from the disk cache) both kernels without rendering, so that no
+        pass pays for it."""
         self.render_pass(0, 0, 0, 0, 0)
+        parts, part_stats = self._scratch(2)
+        sum_groups[self.grid, self.block](parts, part_stats, 2, self.d_out, self.d_stats)
+        cuda.synchronize()
 
     def _scratch(self, groups):
+        """The scratch film for ``groups`` sample groups: a view of one allocation that
+        only grows (progressive passes double their samples until the launch is full)."""
         if groups == 1:
             return self.d_out.reshape((1,) + self.d_out.shape), \
                 self.d_stats.reshape((1,) + self.d_stats.shape)
-        if groups not in self._parts:
-            self._parts.clear()    # one size at a time: passes grow, then stay
+        if self._parts is None or self._parts[0].shape[0] < groups:
             h, w = self.scene.height, self.scene.width
-            self._parts[groups] = (cuda.device_array((groups, h, w, 3), np.float32),
-                                   cuda.device_array((groups, h, w, 3), np.int32))
-        return self._parts[groups]
+            self._parts = (cuda.device_array((groups, h, w, 3), np.float32),
+                           cuda.device_array((groups, h, w, 3), np.int32))
+        return self._parts[0][:groups], self._parts[1][:groups]
 
     def launch(self, sample_start, n_samples, seed, max_bounces, rr_depth):
         """Start a pass without waiting (for timing the kernel alone)."""
