@@ -24,9 +24,9 @@ SIZES = {
 
 # name -> CUDABackend options
 VARIANTS = {
-    "pixel-exact": dict(target_threads=1, max_registers=None, fast=None),   # 2026-11-22's
-    "groups-exact": dict(max_registers=None, fast=None),
-    "groups-r64": dict(fast=None),
+    "pixel-exact": dict(target_threads=1, max_registers=None, fast=False),  # 2026-11-22's
+    "groups-exact": dict(max_registers=None, fast=False),
+    "groups-r64": dict(fast=False),
     "groups-fast": dict(max_registers=None),
     "default": dict(),                              # groups, 64 registers, approx
     "r48": dict(max_registers=48),

@@ -25,24 +25,23 @@ TARGET_THREADS = 1 << 23
 MAX_SLICES = 1 << 23
 # Registers per thread: the megakernel wants ~130; capped at 64 (the rest spills to L1)
 # twice as many warps fit on an SM, which hides the latency of the divergent traversal and
-# shading better than the registers save (H100, 2026-11-23: +15-28 % on every benchmark
+# shading better than the registers save (H100, 2026-11-23: +11-28 % on every benchmark
 # scene; 80 and 96 were in between). bench/gpu_launch.py measures the alternatives.
 MAX_REGISTERS = 64
-# fast="approx": NVVM's approximate division and square root and flushed denormals
-# (ftz=1, prec_div=0, prec_sqrt=0, fma=1) and LLVM's fast-math flags except nnan and ninf:
-# the kernels test for NaN and rely on IEEE infinities (the slab test divides by zero).
-FAST_FLAGS = {"approx": frozenset({"nsz", "arcp", "contract", "afn", "reassoc"})}
+# fast=True: NVVM's approximate division and square root and flushed denormals (ftz=1,
+# prec_div=0, prec_sqrt=0, fma=1) and LLVM's fast-math flags except nnan and ninf: the
+# kernels test for NaN and rely on IEEE infinities (the slab test divides by zero).
+FAST_MATH_FLAGS = frozenset({"nsz", "arcp", "contract", "afn", "reassoc"})
 
 
 @functools.lru_cache(maxsize=None)
-def pass_kernel(features, max_registers=None, fast=None):
+def pass_kernel(features, max_registers=None, fast=False):
     render_pixel = make_render_pixel(features, "cuda")
-    fastmath = set(FAST_FLAGS[fast]) if fast else False
+    fastmath = set(FAST_MATH_FLAGS) if fast else False
 
     # Numba's disk cache keys on the kernel's code and closure values, not on the jit
     # options: the options' own key is read below so that each set is cached apart.
-    options_key = (max_registers or 0) * 16 + (1 + sorted(FAST_FLAGS).index(fast) if fast
-                                                else 0)
+    options_key = (max_registers or 0) * 2 + bool(fast)
 
     # the simulator runs Python: it takes neither option
     options = {} if config.ENABLE_CUDASIM else dict(max_registers=max_registers,
@@ -92,12 +91,12 @@ def sample_groups(width, height, n_samples, target_threads=TARGET_THREADS):
 class CUDABackend:
     name = "cuda"
 
-    def __init__(self, scene, block=BLOCK, max_registers=MAX_REGISTERS, fast="approx",
+    def __init__(self, scene, block=BLOCK, max_registers=MAX_REGISTERS, fast=True,
                  target_threads=TARGET_THREADS):
         self.scene = scene
         self.block = tuple(block)
         self.target_threads = target_threads
-        self.kernel = pass_kernel(scene.features, max_registers, fast)
+        self.kernel = pass_kernel(scene.features, max_registers, bool(fast))
         self.d_scene = SceneArrays(*[cuda.to_device(a) for a in scene.arrays])
         h, w = scene.height, scene.width
         self.d_out = cuda.device_array((h, w, 3), np.float32)
@@ -112,8 +111,8 @@ class CUDABackend:
         """Compile (or load from the disk cache) both kernels without rendering, so that no
         pass pays for it."""
         self.render_pass(0, 0, 0, 0, 0)
-        parts, part_stats = self._scratch(2)
-        sum_groups[self.grid, self.block](parts, part_stats, 2, self.d_out, self.d_stats)
+        parts, part_stats = self._scratch(1)     # views of the film: same types, no memory
+        sum_groups[(1, 1), (1, 1)](parts, part_stats, 1, self.d_out, self.d_stats)
         cuda.synchronize()
 
     def _scratch(self, groups):

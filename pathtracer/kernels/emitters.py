@@ -18,10 +18,8 @@ none). ``pdf_light`` = 0 means no sample.
 The environment's radiance is left out of the record (zero): :func:`environment_radiance`
 evaluates it once the shadow ray found the sky visible, because that lookup (two inverse
 trigonometric functions and a bilinear filter) for every occluded sample cost 12% on an
-H100 in the bunny-studio scene. The other kinds' radiance is a table lookup, and a record
-that carried what a later evaluation needs instead (material, texture coordinates) made the
-CPU kernel 1.5x slower on the Cornell box (LLVM kept more of the path state live across the
-shadow ray's traversal; measured with ``python -m bench.ab``, 2026-11-23).
+H100 in the bunny-studio scene. The other kinds' radiance is a table lookup, cheaper done at
+once than carrying what it needs (material, texture coordinates) past the shadow ray.
 """
 import functools
 from typing import NamedTuple
