@@ -5,14 +5,36 @@ Why the kernel folder is keyed by our source hash:
 Numba's ``cache=True`` re-validates a cached function only against its *own* source file;
 a change in a device function it calls (another module) is not seen, and the stale binary
 would be reused. So the cache lives in a folder named after a hash of every source file of
-this package: any change to any kernel gives a fresh cache. It also keeps compiled files out
-of the installed package (which may be read-only). ``NUMBA_CACHE_DIR``, when set by the
-user, is respected; ``PT_RENDER_CACHE`` moves pt-render's whole cache.
+this package: any change to any kernel gives a fresh cache. ``NUMBA_CACHE_DIR``, when set by
+the user, is respected; ``PT_RENDER_CACHE`` moves pt-render's whole cache.
+
+A cache must never cost a render:
+
+- **Unusable folder** (read-only, a file, no space to create it): kernels are compiled
+  without a disk cache this run, with a warning. Numba would otherwise fall back to a
+  ``__pycache__`` inside the installed package, where a later edit of a kernel module was
+  not seen (a stale image); :func:`jit_cache` tells every decorator whether to cache.
+- **Damaged files** (a truncated or corrupt index or binary): Numba raises an unpickling
+  error on load. :func:`install_guards` wraps Numba's load so that a failure moves the
+  kernel folder aside (``<folder>.damaged-<time>``), warns once, and compiles afresh into
+  a new folder.
+- **Failed writes** (disk full): the kernel is used uncached, with one warning.
 """
 import hashlib
 import os
+import sys
+import time
 
 import numba
+
+_state = {"enabled": True, "folder": None, "warned": set()}
+
+
+def warn(message):
+    """One ``pt-render: warning:`` line on stderr, once per message."""
+    if message not in _state["warned"]:
+        _state["warned"].add(message)
+        print(f"pt-render: warning: {message}", file=sys.stderr)
 
 
 def source_hash():
@@ -37,8 +59,101 @@ def cache_root():
     return d
 
 
+def writable(folder):
+    """None if files can be created in ``folder`` (made if missing), else the reason."""
+    try:
+        os.makedirs(folder, exist_ok=True)
+        probe = os.path.join(folder, f".probe-{os.getpid()}")
+        with open(probe, "wb") as f:
+            f.write(b"x")
+        os.unlink(probe)
+        return None
+    except OSError as e:
+        return e.strerror or str(e)
+
+
 def configure():
-    """Point Numba's cache at this version's kernel folder (unless NUMBA_CACHE_DIR is set)."""
-    if os.environ.get("NUMBA_CACHE_DIR"):
+    """Point Numba's cache at this version's kernel folder (unless NUMBA_CACHE_DIR is set),
+    or turn disk caching off if that folder cannot be written."""
+    folder = os.environ.get("NUMBA_CACHE_DIR") or os.path.join(cache_root(), "numba",
+                                                               source_hash())
+    reason = writable(folder)
+    if reason is not None:
+        _state["enabled"] = False
+        which = "NUMBA_CACHE_DIR" if os.environ.get("NUMBA_CACHE_DIR") else (
+            "PT_RENDER_CACHE" if os.environ.get("PT_RENDER_CACHE") else "the cache folder")
+        warn(f"kernel cache {folder} is not usable ({reason}); compiling without a disk "
+             f"cache (set {which} to a writable folder to keep compiled kernels)")
         return
-    numba.config.CACHE_DIR = os.path.join(cache_root(), "numba", source_hash())
+    _state["folder"] = folder
+    if not os.environ.get("NUMBA_CACHE_DIR"):
+        numba.config.CACHE_DIR = folder
+    install_guards()
+
+
+def jit_cache():
+    """The ``cache=`` value for every pt-render ``@njit`` / ``@cuda.jit``."""
+    return _state["enabled"]
+
+
+def _ours(cache):
+    folder = _state["folder"]
+    path = getattr(cache, "_cache_path", None)
+    return folder is not None and path is not None and os.path.abspath(path).startswith(
+        os.path.abspath(folder) + os.sep)
+
+
+def _quarantine(error):
+    """Move the damaged kernel folder aside; later loads miss and recompile, and saves
+    recreate the folder."""
+    folder = _state["folder"]
+    aside = f"{folder}.damaged-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
+    try:
+        os.replace(folder, aside)
+        where = f"moved to {aside}"
+    except OSError:
+        where = "left in place"
+    warn(f"the kernel cache in {folder} is damaged ({type(error).__name__}: "
+         f"{' '.join(str(error).split())[:120]}); it was {where} and the kernels are "
+         "compiled afresh")
+
+
+def _guarded(cls):
+    if getattr(cls, "_pt_render_guarded", False):
+        return
+    load, save = cls.load_overload, cls.save_overload
+
+    def load_overload(self, sig, target_context):
+        if not _ours(self):
+            return load(self, sig, target_context)
+        try:
+            return load(self, sig, target_context)
+        except Exception as e:    # unpickling errors of every kind: a damaged file
+            _quarantine(e)
+            return None           # a cache miss: Numba compiles
+
+    def save_overload(self, sig, data):
+        if not _ours(self):
+            return save(self, sig, data)
+        try:
+            return save(self, sig, data)
+        except Exception as e:    # disk full, folder removed, damaged index
+            warn(f"could not write the kernel cache in {_state['folder']} "
+                 f"({getattr(e, 'strerror', None) or type(e).__name__}); the kernels work "
+                 "but will be compiled again next run")
+
+    cls.load_overload = load_overload
+    cls.save_overload = save_overload
+    cls._pt_render_guarded = True
+
+
+def install_guards():
+    """Wrap Numba's (and numba-cuda's) cache load and save for pt-render's folder only."""
+    from numba.core import caching
+    _guarded(caching.Cache)
+    try:
+        from numba.cuda.core import caching as cuda_caching
+    except ImportError:      # numba-cuda absent or laid out differently: CPU only
+        return
+    if cuda_caching.Cache is not caching.Cache:
+        _guarded(cuda_caching.Cache)

@@ -1,68 +1,105 @@
-"""``pt-render SCENE``: render a scene file progressively to PNG + a float image."""
+"""``pt-render SCENE``: render a scene file progressively to PNG + a float image.
+
+Failures are one line and an exit code (:mod:`pathtracer.errors`): 2 for bad input, 3 when
+an output cannot be written, 128 + N when signal N stopped the render (after saving), 1
+for a bug. ``--debug`` adds the traceback.
+"""
 import argparse
 import csv
+import math
 import os
 import signal
 import sys
+import tempfile
 import time
+import traceback
 
-from .film import ALL_FORMATS, read_image, relmse, write_image
+from . import limits
+from .errors import (EXIT_INPUT, EXIT_INTERNAL, EXIT_IO, EXIT_OK, InputError, Interrupted,
+                     OutputError)
+from .film import ALL_FORMATS, read_image, write_images
 from .scene import SceneError
+
+STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP")
+                     if hasattr(signal, n))
+
+
+# ---------------------------------------------------------------------------------------
+# Arguments
+
+class Parser(argparse.ArgumentParser):
+    def error(self, message):
+        """One line and exit 2 (argparse prints the usage block as well)."""
+        print(f"pt-render: error: {message} (pt-render --help lists the options)",
+              file=sys.stderr)
+        sys.exit(EXIT_INPUT)
+
+
+def _integer(lo, hi):
+    def parse(text):
+        try:
+            v = int(text, 10)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer in [{lo}, {hi}], got "
+                                             f"{text!r}") from None
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"must be in [{lo}, {hi}], got {v}")
+        return v
+    return parse
+
+
+def _seconds(text):
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") \
+            from None
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return v
 
 
 def _resolution(text):
     try:
-        w, h = (int(x) for x in text.lower().split("x"))
-        if w < 1 or h < 1:
-            raise ValueError
-        return w, h
+        w, h = (int(x, 10) for x in text.lower().split("x"))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, e.g. 512x512, got {text!r}")
-
-
-def _nonneg_int(text):
-    v = int(text)
-    if v < 0:
-        raise argparse.ArgumentTypeError("must be >= 0")
-    return v
-
-
-def _pos_int(text):
-    v = int(text)
-    if v < 1:
-        raise argparse.ArgumentTypeError("must be >= 1")
-    return v
-
-
-def _pos_float(text):
-    v = float(text)
-    if not v > 0:
-        raise argparse.ArgumentTypeError("must be > 0")
-    return v
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, e.g. 512x512, got {text!r}") \
+            from None
+    if not (1 <= w <= limits.MAX_DIMENSION and 1 <= h <= limits.MAX_DIMENSION):
+        raise argparse.ArgumentTypeError(f"width and height must be in [1, "
+                                         f"{limits.MAX_DIMENSION}], got {text!r}")
+    if w * h > limits.MAX_PIXELS:
+        raise argparse.ArgumentTypeError(f"at most {limits.MAX_PIXELS} pixels, got {w * h}")
+    return w, h
 
 
 def build_parser():
-    p = argparse.ArgumentParser(
+    p = Parser(
         prog="pt-render",
         description="Physically based path tracer (Numba, CPU and CUDA). Renders SCENE "
-                    "progressively: the image is rewritten at growing intervals, and Ctrl-C "
-                    "stops the render and keeps what is done.")
+                    "progressively: the image is rewritten at growing intervals, and Ctrl-C, "
+                    "SIGTERM or SIGHUP stop the render and keep what is done. Exit codes: 0 "
+                    "done, 2 bad input, 3 an output could not be written, 128+N stopped by "
+                    "signal N (the image saved), 1 a bug.")
     p.add_argument("scene", help="scene file (JSON, see docs/scene-format.md), or a thesis "
                    "renderer scene folder")
     p.add_argument("-o", "--output", default=None,
                    help="output image; the extension picks the format: .png (8-bit sRGB, "
                         "with a lossless float .exr beside it), .hdr, .exr or .npy (float linear RGB). "
                         "Default: the scene's name with .png, in the current folder")
-    p.add_argument("--spp", type=_pos_int, help="samples per pixel (default: the scene's)")
-    p.add_argument("--time", type=_pos_float, metavar="SECONDS",
+    p.add_argument("--spp", type=_integer(1, limits.MAX_SPP),
+                   help="samples per pixel (default: the scene's)")
+    p.add_argument("--time", type=_seconds, metavar="SECONDS",
                    help="render until this much time is spent (with --spp: whichever first)")
     p.add_argument("--backend", choices=("auto", "cpu", "cuda", "python"), default="auto",
                    help="auto: CUDA when a GPU is present, else CPU; python: interpreted "
                         "(slow, for debugging)")
-    p.add_argument("--seed", type=_nonneg_int, help="random seed (default: the scene's)")
+    p.add_argument("--seed", type=_integer(0, limits.MAX_SEED),
+                   help="random seed (default: the scene's)")
     p.add_argument("--resolution", type=_resolution, metavar="WxH",
                    help="override the camera resolution")
-    p.add_argument("--max-bounces", type=_nonneg_int, help="override render.maxBounces")
+    p.add_argument("--max-bounces", type=_integer(0, limits.MAX_BOUNCES),
+                   help="override render.maxBounces")
     p.add_argument("--reference", metavar="IMAGE",
                    help="reference image (.npy, .hdr, .exr): print elapsed s, spp and relMSE "
                         "after each pass and write them as CSV (see --reference-csv)")
@@ -74,81 +111,267 @@ def build_parser():
                    help="thesis scene folders: render with defaults for missing files "
                         "(objects left out, textures at their default values, a grey "
                         "environment for a missing HDRI), with a warning")
+    p.add_argument("--debug", action="store_true",
+                   help="show the Python traceback of an error")
     return p
 
 
-def _fail(message):
-    print(f"pt-render: error: {message}", file=sys.stderr)
-    return 2
+# ---------------------------------------------------------------------------------------
+# Signals: SIGINT, SIGTERM and SIGHUP all stop the render after saving what is done.
+
+class StopSignals:
+    """While active, a stop signal raises :class:`Interrupted` (the render loop ends and
+    saves); inside :meth:`deferred` (a save in progress) it is only recorded and raised
+    when the save is complete, so no save is ever cut short."""
+
+    def __init__(self):
+        self.previous = {}
+        self.defer = 0
+        self.pending = None
+
+    def __enter__(self):
+        for s in STOP_SIGNALS:
+            try:
+                self.previous[s] = signal.signal(s, self._handler)
+            except ValueError:       # not the main thread: leave the handlers alone
+                break
+        return self
+
+    def __exit__(self, *exc):
+        for s, h in self.previous.items():
+            signal.signal(s, h)
+        return False
+
+    def _handler(self, signum, frame):
+        if self.defer:
+            self.pending = self.pending or signum
+        else:
+            raise Interrupted(signum)
+
+    class _Deferred:
+        def __init__(self, owner, raise_after):
+            self.owner = owner
+            self.raise_after = raise_after
+
+        def __enter__(self):
+            self.owner.defer += 1
+
+        def __exit__(self, exc_type, *rest):
+            self.owner.defer -= 1
+            pending = self.owner.pending
+            if pending and self.raise_after and exc_type is None and not self.owner.defer:
+                self.owner.pending = None
+                raise Interrupted(pending)
+            return False
+
+    def deferred(self, raise_after=True):
+        return self._Deferred(self, raise_after)
+
+
+# ---------------------------------------------------------------------------------------
+# Outputs
+
+def _check_writable_folder(path, flag):
+    """Fail before rendering if ``path`` cannot be written (a missing or read-only folder,
+    a path that is a folder)."""
+    if path == "":
+        raise InputError(f"{flag}: empty path")
+    if os.path.isdir(path):
+        raise InputError(f"{flag} {path}: is a folder (give a file name)")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise InputError(f"{flag} {path}: folder {folder} does not exist")
+    try:
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".pt-render-probe-")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise InputError(f"{flag} {path}: cannot write in {folder} "
+                         f"({e.strerror or e})") from None
+
+
+def _fallback_targets(targets):
+    """The same file names in the first folder where they can be written: the temporary
+    folder, then the current one, then home."""
+    seen = {os.path.dirname(os.path.abspath(p)) for p in targets}
+    for folder in (tempfile.gettempdir(), os.getcwd(), os.path.expanduser("~")):
+        folder = os.path.abspath(folder)
+        if folder in seen or not os.path.isdir(folder):
+            continue
+        seen.add(folder)
+        stem = f"pt-render-{os.getpid()}-"
+        yield [os.path.join(folder, stem + os.path.basename(p)) for p in targets]
+
+
+class Saver:
+    """Writes the image (and its float twin beside a PNG) as one unit; a periodic save that
+    fails warns and is retried at the next refresh; the final save falls back to another
+    folder and says where."""
+
+    def __init__(self, targets, signals, warn):
+        self.targets = targets
+        self.signals = signals
+        self.warn = warn
+        self.last_error = None
+
+    def periodic(self, image):
+        try:
+            with self.signals.deferred():
+                write_images(self.targets, image)
+            self.last_error = None
+        except OSError as e:
+            message = f"could not save {self.targets[0]} ({e.strerror or e})"
+            if message != self.last_error:
+                self.warn(f"{message}; rendering goes on and the next refresh retries")
+            self.last_error = message
+
+    def final(self, image):
+        """The targets written, or raises OutputError after saving elsewhere if it can."""
+        with self.signals.deferred(raise_after=False):
+            try:
+                write_images(self.targets, image)
+                return self.targets
+            except OSError as e:
+                first = e
+            tried = []
+            for alt in _fallback_targets(self.targets):
+                try:
+                    write_images(alt, image)
+                except OSError:
+                    tried.append(os.path.dirname(alt[0]))
+                    continue
+                raise OutputError(f"cannot write {self.targets[0]} ({first.strerror or first}); "
+                                  f"the image was saved to {' and '.join(alt)} instead")
+            raise OutputError(f"cannot write {self.targets[0]} ({first.strerror or first}); "
+                              f"nothing could be saved (also tried {', '.join(tried) or 'no other folder'})")
+
+
+# ---------------------------------------------------------------------------------------
+# The command
+
+def _one_line_warning(message, category, filename, lineno, line=None):
+    """Library warnings as one line each (the source line is noise to a user)."""
+    return f"pt-render: warning: {category.__name__}: {' '.join(str(message).split())}\n"
 
 
 def main(argv=None):
     args = build_parser().parse_args(argv)
-    # Ctrl-C must not be swallowed by a library: restore Python's default handler.
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    scene_path = args.scene
-    output = args.output or os.path.splitext(os.path.basename(scene_path.rstrip("/")))[0] + ".png"
-    ext = os.path.splitext(output)[1].lower()
-    if ext not in ALL_FORMATS:
-        return _fail(f"--output {output}: unknown image format {ext!r} "
-                     f"(use {', '.join(ALL_FORMATS)})")
-    out_dir = os.path.dirname(os.path.abspath(output))
-    if not os.path.isdir(out_dir):
-        return _fail(f"--output {output}: folder {out_dir} does not exist")
-    float_output = os.path.splitext(output)[0] + ".exr" if ext == ".png" else None
-
-    from .scene import load_scene_description, compile_scene
-    t0 = time.perf_counter()
+    import warnings
+    format_warning = warnings.formatwarning
+    if not args.debug:
+        warnings.formatwarning = _one_line_warning
     try:
-        desc = load_scene_description(scene_path, allow_missing=args.allow_missing)
-        for w in desc.warnings:
-            print(f"pt-render: warning: {w}", file=sys.stderr)
-        if args.resolution:
-            desc.camera.resolution = args.resolution
-        scene = compile_scene(desc)
-    except SceneError as e:
-        return _fail(str(e))
+        return _main(args)
+    finally:
+        warnings.formatwarning = format_warning
+
+
+def _main(args):
+    with StopSignals() as signals:
+        try:
+            return _render(args, signals)
+        except Interrupted as e:
+            print(f"pt-render: interrupted ({signal.Signals(e.signum).name}) before the first "
+                  "pass; nothing written", file=sys.stderr)
+            return e.exit_code
+        except KeyboardInterrupt:
+            print("pt-render: interrupted before the first pass; nothing written",
+                  file=sys.stderr)
+            return 128 + signal.SIGINT
+        except (SceneError, InputError) as e:
+            return _fail(e, args, EXIT_INPUT)
+        except OutputError as e:
+            return _fail(e, args, EXIT_IO)
+        except MemoryError as e:
+            return _fail(f"out of memory ({e or 'allocation failed'}): lower the resolution "
+                         "or the size of the scene's textures and meshes", args, EXIT_INPUT)
+        except Exception as e:
+            return _fail(f"internal error: {type(e).__name__}: {_one_line(e, 300)} (a bug in "
+                         "pt-render: please report it with the scene; --debug shows the "
+                         "traceback)", args, EXIT_INTERNAL)
+
+
+def _one_line(e, limit=None):
+    text = " ".join(str(e).split())
+    if limit and len(text) > limit:     # a library's message may be a page long
+        text = text[:limit] + "..."
+    return text
+
+
+def _fail(error, args, code):
+    if getattr(args, "debug", False):
+        traceback.print_exc()
+    message = error if isinstance(error, str) else _one_line(error)
+    print(f"pt-render: error: {message}", file=sys.stderr)
+    return code
+
+
+def _render(args, signals):
+    log = sys.stderr
+    scene_path = args.scene
+    output = args.output
+    if output is None:
+        output = os.path.splitext(os.path.basename(scene_path.rstrip("/")))[0] + ".png"
+    ext = os.path.splitext(output)[1].lower()
+    if output == "":
+        raise InputError("--output: empty path")
+    if ext not in ALL_FORMATS:
+        raise InputError(f"--output {output}: unknown image format {ext!r} "
+                         f"(use {', '.join(ALL_FORMATS)})")
+    targets = [output] + ([os.path.splitext(output)[0] + ".exr"] if ext == ".png" else [])
+    for t in targets:
+        _check_writable_folder(t, "--output")
+    csv_path = None
+    if args.reference:
+        csv_path = args.reference_csv or os.path.splitext(output)[0] + ".relmse.csv"
+        _check_writable_folder(csv_path, "--reference-csv")
+
+    from .memory import check_film
+    from .scene import compile_scene, load_scene_description
+    t0 = time.perf_counter()
+    desc = load_scene_description(scene_path, allow_missing=args.allow_missing)
+    for w in desc.warnings:
+        print(f"pt-render: warning: {w}", file=log)
+    if args.resolution:
+        desc.camera.resolution = args.resolution
+    check_film(*desc.camera.resolution, args.backend)
+    scene = compile_scene(desc)
     load_seconds = time.perf_counter() - t0
+    for w in scene.warnings:
+        print(f"pt-render: warning: {w}", file=log)
 
     reference = None
     if args.reference:
-        try:
-            reference = read_image(args.reference)
-        except (OSError, ValueError) as e:
-            return _fail(f"--reference {args.reference}: {e}")
-        if reference.shape[:2] != (scene.height, scene.width):
-            return _fail(f"--reference {args.reference}: size {reference.shape[1]}x"
-                         f"{reference.shape[0]} differs from the image's "
-                         f"{scene.width}x{scene.height}")
+        reference = _read_reference(args.reference, scene)
 
     pixels = None
     if args.pixel:
         if args.backend != "python":
-            return _fail("--pixel needs --backend python")
+            raise InputError("--pixel needs --backend python")
         try:
-            x, y = (int(v) for v in args.pixel.split(","))
+            x, y = (int(v, 10) for v in args.pixel.split(","))
         except ValueError:
-            return _fail(f"--pixel: expected X,Y, got {args.pixel!r}")
+            raise InputError(f"--pixel: expected X,Y, got {args.pixel!r}") from None
         if not (0 <= x < scene.width and 0 <= y < scene.height):
-            return _fail(f"--pixel {x},{y} is outside the {scene.width}x{scene.height} image")
+            raise InputError(f"--pixel {x},{y} is outside the {scene.width}x{scene.height} "
+                             "image")
         pixels = [(x, y)]
 
     from .backends import make_backend
     try:
         backend = make_backend(args.backend, scene, **({"pixels": pixels} if pixels else {}))
     except RuntimeError as e:
-        return _fail(str(e))
+        raise InputError(str(e)) from None
 
     spp = args.spp if args.spp is not None else (None if args.time else scene.spp)
-    log = sys.stderr
     print(f"pt-render: {scene_path}: {scene.width}x{scene.height}, {scene.n_triangles} "
           f"triangles, loaded in {load_seconds:.2f} s (BVH {scene.timings['bvh_build']:.2f} s); "
           f"backend {backend.name}; features "
           f"{', '.join(k for k, v in scene.features._asdict().items() if v) or 'none'}",
           file=log)
 
-    from .render import render
     from .progress import Progress
+    from .render import render
     t0 = time.perf_counter()
     if not args.quiet:
         print("pt-render: compiling kernels (cached on disk after the first run)...", file=log)
@@ -158,14 +381,9 @@ def main(argv=None):
         print(f"pt-render: kernels ready in {compile_seconds:.2f} s", file=log)
     progress = Progress(spp, args.time, scene.width * scene.height, quiet=args.quiet,
                         stream=log)
+    saver = Saver(targets, signals, lambda m: progress.write(f"pt-render: warning: {m}"))
     rows = []
     next_write = [1.0]
-
-    def save(film):
-        image = film.image()
-        write_image(output, image)
-        if float_output:
-            write_image(float_output, image)
 
     def on_pass(film, elapsed):
         progress.update(film.spp, elapsed)
@@ -174,10 +392,11 @@ def main(argv=None):
             rows.append((elapsed, film.spp, err))
             progress.write(f"{elapsed:10.3f} s {film.spp:8d} spp  relMSE {err:.6g}")
         if elapsed >= next_write[0]:
-            save(film)
+            saver.periodic(film.image())
             next_write[0] = elapsed * 2   # refresh at growing intervals
 
     if reference is not None:
+        from .film import relmse
         progress.write(f"{'elapsed':>12} {'spp':>12}  relMSE")
     result = render(scene, backend, spp=spp, time_limit=args.time, seed=args.seed,
                     max_bounces=args.max_bounces, on_pass=on_pass,
@@ -185,29 +404,54 @@ def main(argv=None):
     progress.close()
     film = result.film
     if film.spp == 0:
-        print("pt-render: stopped before the first pass; no image written", file=log)
-        return 130 if result.interrupted else 1
-    save(film)
+        if result.interrupted:
+            print("pt-render: stopped before the first pass; no image written", file=log)
+            return 128 + result.signal
+        raise OutputError("no samples were rendered; no image written")
+    written = saver.final(film.image())
     if reference is not None:
-        csv_path = args.reference_csv or os.path.splitext(output)[0] + ".relmse.csv"
-        with open(csv_path, "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["elapsed_s", "spp", "relmse"])
-            w.writerows(rows)
+        try:
+            with signals.deferred(raise_after=False), open(csv_path, "w", newline="") as f:
+                w = csv.writer(f)
+                w.writerow(["elapsed_s", "spp", "relmse"])
+                w.writerows(rows)
+        except OSError as e:
+            raise OutputError(f"--reference-csv {csv_path}: cannot write "
+                              f"({e.strerror or e}); the image was written") from None
         print(f"pt-render: relMSE table written to {csv_path}", file=log)
     paths = film.camera_rays / result.seconds if result.seconds > 0 else float("nan")
     rays = (film.camera_rays + film.bounce_rays + film.shadow_rays)
     print(f"pt-render: {film.spp} spp in {result.seconds:.2f} s (compile "
           f"{compile_seconds:.2f} s): {paths / 1e6:.3f} M camera paths/s, "
-          f"{rays / max(result.seconds, 1e-9) / 1e6:.3f} M rays/s; wrote {output}"
-          + (f" and {float_output}" if float_output else ""), file=log)
+          f"{rays / max(result.seconds, 1e-9) / 1e6:.3f} M rays/s; wrote "
+          f"{' and '.join(written)}", file=log)
     if film.nonfinite:
-        print(f"pt-render: WARNING: {film.nonfinite} samples were NaN or infinite "
-              "(kept in the image; please report this scene)", file=log)
+        print(f"pt-render: warning: {film.nonfinite} of {film.camera_rays} samples were NaN "
+              "or infinite and were left out of the image (please report this scene)",
+              file=log)
     if result.interrupted:
-        print("pt-render: interrupted; the image holds the samples done so far", file=log)
-        return 130
-    return 0
+        print(f"pt-render: interrupted ({signal.Signals(result.signal).name}); the image "
+              "holds the samples done so far", file=log)
+        return 128 + result.signal
+    return EXIT_OK
+
+
+def _read_reference(path, scene):
+    import numpy as np
+    try:
+        reference = read_image(path)
+    except FileNotFoundError:
+        raise InputError(f"--reference {path}: file not found") from None
+    except Exception as e:    # each codec reports a damaged file with its own type
+        raise InputError(f"--reference {path}: cannot read the image "
+                         f"({type(e).__name__}: {_one_line(e, 300)})") from None
+    if reference.shape[:2] != (scene.height, scene.width):
+        raise InputError(f"--reference {path}: size {reference.shape[1]}x"
+                         f"{reference.shape[0]} differs from the image's "
+                         f"{scene.width}x{scene.height}")
+    if not np.isfinite(reference).all():
+        raise InputError(f"--reference {path}: contains NaN or infinite values")
+    return reference
 
 
 if __name__ == "__main__":

@@ -63,9 +63,16 @@ def srgb_to_linear(c):
 
 
 def linear_to_srgb(x):
-    """The exact piecewise sRGB encoding (IEC 61966-2-1), x clamped to [0, 1]."""
+    """The exact piecewise sRGB encoding (IEC 61966-2-1), x clamped to [0, 1] (in the
+    input's float precision: a float32 image is not copied to float64)."""
+    x = np.asarray(x)
     x = np.clip(np.nan_to_num(x, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    out = np.atleast_1d(np.power(x, 1 / 2.4))
+    out *= 1.055
+    out -= 0.055
+    low = np.atleast_1d(x <= 0.0031308)
+    out[low] = 12.92 * np.atleast_1d(x)[low]
+    return out.reshape(x.shape)
 
 
 def to_display(image):
@@ -89,8 +96,12 @@ def encode(image, ext):
         import OpenEXR
         with tempfile.NamedTemporaryFile(suffix=".exr") as f:
             channels = {"RGB": np.ascontiguousarray(image, np.float32)}
-            OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION,
-                          "type": OpenEXR.scanlineimage}, channels).write(f.name)
+            try:
+                OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION,
+                              "type": OpenEXR.scanlineimage}, channels).write(f.name)
+            except RuntimeError as e:   # OpenEXR reports I/O failures (a full disk) so
+                raise OSError(f"cannot write an EXR file: {' '.join(str(e).split())}") \
+                    from None
             return open(f.name, "rb").read()
     if ext == ".npy":
         buf = io.BytesIO()
@@ -101,46 +112,73 @@ def encode(image, ext):
 
 def write_image(path, image):
     """Write atomically: a reader sees the old file or the new one, never half of one."""
-    data = encode(image, os.path.splitext(path)[1])
-    folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tmp-", suffix=os.path.splitext(path)[1])
+    write_images([path], image)
+
+
+def write_images(paths, image):
+    """Write ``image`` to each of ``paths`` (a PNG and its float twin) as one unit: every
+    file is encoded and written to a temporary file beside its target first, and only
+    when all are complete are they renamed over the targets, so the files never come
+    from different passes and a reader never sees half of one. On failure nothing is
+    replaced and no temporary file is left."""
+    data = [encode(image, os.path.splitext(p)[1]) for p in paths]
+    temps = []
     try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        # mkstemp makes the file private (0600); give it the permissions of a normal file.
         umask = os.umask(0)
         os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
+        for path, blob in zip(paths, data):
+            folder = os.path.dirname(os.path.abspath(path))
+            fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tmp-",
+                                       suffix=os.path.splitext(path)[1])
+            temps.append(tmp)
+            with os.fdopen(fd, "wb") as f:
+                f.write(blob)
+                f.flush()
+                os.fsync(f.fileno())
+            # mkstemp makes the file private (0600); give it a normal file's permissions.
+            os.chmod(tmp, 0o666 & ~umask)
+        for path, tmp in zip(paths, temps):
+            os.replace(tmp, path)
     except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+        for tmp in temps:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
         raise
 
 
-def read_pixels(path):
-    """(pixels, is_float) of an image file: float64 H x W x C, scaled to [0, 1] for
-    integer formats (not decoded: sRGB stays sRGB), and whether the file holds floats.
-    The one image reader, for textures, environment maps and reference images."""
+def read_raw(path):
+    """The pixels of an image file as its codec returns them (H x W [x C], integer or
+    float) and whether they are floats. The one image reader, for textures, environment
+    maps and reference images."""
     ext = os.path.splitext(path)[1].lower()
     if ext == ".npy":
-        return np.asarray(np.load(path), np.float64), True
+        img = np.load(path, allow_pickle=False)
+        if img.dtype.kind not in "uif":
+            raise ValueError(f"expected a numeric array, got dtype {img.dtype}")
+        return img, img.dtype.kind == "f"
     if ext == ".hdr":
         import imagecodecs
         with open(path, "rb") as f:
-            return np.asarray(imagecodecs.rgbe_decode(f.read()), np.float64), True
+            return imagecodecs.rgbe_decode(f.read()), True
     if ext == ".exr":
         import OpenEXR
         with OpenEXR.File(path) as f:
             ch = f.channels()
             img = ch["RGB"].pixels if "RGB" in ch else np.stack(
                 [ch[c].pixels for c in "RGB"], axis=-1)
-        return np.asarray(img, np.float64), True
+        return img, True
     import imageio.v3 as iio
     raw = iio.imread(path)
+    return raw, raw.dtype.kind == "f"
+
+
+def read_pixels(path):
+    """(pixels, is_float) of an image file: float64 H x W x C, scaled to [0, 1] for
+    integer formats (not decoded: sRGB stays sRGB), and whether the file holds floats."""
+    raw, is_float = read_raw(path)
     if raw.dtype.kind in "ui":
         return raw.astype(np.float64) / np.iinfo(raw.dtype).max, False
-    return raw.astype(np.float64), raw.dtype.kind == "f"
+    return raw.astype(np.float64), is_float
 
 
 def read_image(path):

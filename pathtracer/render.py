@@ -1,7 +1,10 @@
 """Progressive rendering: passes of growing size accumulated into a float64 film."""
+import signal
 import time
 from dataclasses import dataclass, field
 
+from . import limits
+from .errors import Interrupted
 from .film import Film
 
 
@@ -11,6 +14,7 @@ class RenderResult:
     seconds: float           # rendering time, compile excluded
     compile_seconds: float
     interrupted: bool = False
+    signal: int = 0          # the signal that stopped the render (SIGINT for Ctrl-C)
     passes: list = field(default_factory=list)   # (elapsed s, spp) after each pass
 
 
@@ -21,8 +25,10 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
 
     Pass sizes start at 1 spp and double while a pass is shorter than ``pass_seconds``, so
     the image refreshes quickly at first and overhead stays small later. ``on_pass(film,
-    elapsed)`` is called after every pass. Ctrl-C stops after the current pass and returns
-    the samples done so far (``interrupted`` is set).
+    elapsed)`` is called after every pass. Ctrl-C (or any :class:`~.errors.Interrupted`)
+    stops the render and returns the samples of the passes completed (``interrupted`` and
+    ``signal`` are set). A render never exceeds ``limits.MAX_SPP`` samples per pixel (the
+    random streams are indexed by 32-bit sample numbers).
     """
     seed = scene.seed if seed is None else seed
     max_bounces = scene.max_bounces if max_bounces is None else max_bounces
@@ -39,10 +45,11 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
     try:
         while True:
             elapsed = time.perf_counter() - start
-            if spp is not None and film.spp >= spp:
+            if (spp is not None and film.spp >= spp) or film.spp >= limits.MAX_SPP:
                 break
             if time_limit is not None and elapsed >= time_limit:
                 break
+            n = min(n, limits.MAX_PASS_SAMPLES, limits.MAX_SPP - film.spp)
             if spp is not None:
                 n = min(n, spp - film.spp)
             t_pass = time.perf_counter()
@@ -60,8 +67,10 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
                 n //= 2
             if time_limit is not None and dt > 0:
                 left = time_limit - elapsed
-                n = max(1, min(n, int(left / (dt / n)))) if left > 0 else n
-    except KeyboardInterrupt:
+                if left > 0:   # (float: a huge time limit must not overflow an int)
+                    n = max(1, int(min(float(n), left / (dt / n))))
+    except KeyboardInterrupt as e:
         result.interrupted = True
+        result.signal = e.signum if isinstance(e, Interrupted) else int(signal.SIGINT)
     result.seconds = time.perf_counter() - start
     return result

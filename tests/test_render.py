@@ -145,6 +145,8 @@ def test_nonfinite_samples_are_counted(tmp_path):
     scene.arrays.mat[0, L.M_EMISSION] = np.nan   # poison the emission behind the loader's back
     result = render(scene, make_backend("cpu", scene), spp=2)
     assert result.film.nonfinite == 4 * 4 * 2
+    # ... and left out of the image, which stays finite
+    assert np.isfinite(result.film.image()).all()
 
 
 SPECIALISATION_PROBE = r"""

@@ -12,6 +12,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from .._cache import jit_cache
 from ..kernels.constants import STACK_SIZE
 from ..kernels.layout import (BOX_CHILD0, BOX_CHILD1, BOX_MAX, BOX_MIN, BOX_STRIDE, BOX_WIDTH,
                               CHILD0_COUNT, CHILD0_INDEX, CHILD1_COUNT, CHILD1_INDEX,
@@ -30,7 +31,7 @@ class BVH(NamedTuple):
     depth: int
 
 
-@njit(cache=True)
+@njit(cache=jit_cache())
 def _area(lo, hi):
     dx = max(hi[0] - lo[0], 0.0)
     dy = max(hi[1] - lo[1], 0.0)
@@ -38,7 +39,7 @@ def _area(lo, hi):
     return 2.0 * (dx * dy + dy * dz + dz * dx)
 
 
-@njit(cache=True)
+@njit(cache=jit_cache())
 def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split, midpoint):
     n = tri_lo.shape[0]
     order = np.arange(n).astype(np.int32)

@@ -4,6 +4,8 @@ import functools
 import numpy as np
 from numba import njit, prange
 
+from .._cache import jit_cache
+
 from ..kernels.constants import STACK_SIZE
 from ..kernels.integrator import make_render_pixel
 
@@ -13,7 +15,7 @@ def pass_kernel(features):
     render_pixel = make_render_pixel(features)
 
     # error_model='numpy': float division by zero gives inf/nan as on the GPU, not an exception.
-    @njit(parallel=True, cache=True, error_model="numpy")
+    @njit(parallel=True, cache=jit_cache(), error_model="numpy")
     def render_pass(out, stats, sample_start, n_samples, seed, max_bounces, rr_depth, scene):
         for py in prange(out.shape[0]):
             stack = np.empty(STACK_SIZE, np.int32)   # BVH traversal scratch, one per row

@@ -14,6 +14,8 @@ import functools
 import numpy as np
 from numba import config, cuda
 
+from .._cache import jit_cache
+
 from ..kernels.constants import STACK_SIZE
 from ..kernels.integrator import SceneArrays, make_render_pixel
 
@@ -47,7 +49,7 @@ def pass_kernel(features, max_registers=None, fast=False):
     options = {} if config.ENABLE_CUDASIM else dict(max_registers=max_registers,
                                                     fastmath=fastmath)
 
-    @cuda.jit(cache=True, **options)
+    @cuda.jit(cache=jit_cache(), **options)
     def render_pass(out, stats, sample_start, n_samples, seed, max_bounces, rr_depth, scene):
         """Group g = blockIdx.z renders its share of samples [sample_start, + n_samples)
         into out[g], stats[g]."""
@@ -66,7 +68,7 @@ def pass_kernel(features, max_registers=None, fast=False):
     return render_pass
 
 
-@cuda.jit(cache=True)
+@cuda.jit(cache=jit_cache())
 def sum_groups(parts, part_stats, groups, out, stats):
     """out = parts[0] + parts[1] + ... (in that order), the same for the ray counts."""
     px, py = cuda.grid(2)

@@ -195,8 +195,10 @@ def make_render_pixel(features, target="cpu"):
     def render_pixel(px, py, sample_start, n_samples, seed, max_bounces, rr_depth, scene,
                      stack, out, stats):
         """Add n_samples paths of pixel (px, py) to out[py, px] (float32 rgb sums) and
-        count rays and non-finite samples in stats[py, px] (layout STAT_*). Non-finite
-        samples are not dropped: they are counted and reach the image.
+        count rays and non-finite samples in stats[py, px] (layout STAT_*). A NaN or
+        infinite sample is counted and left out of the sum (as zero): one bad path must not
+        turn its pixel, and the image file, into NaN; the count makes it visible instead
+        (the command warns, the tests require it to be zero).
 
         One path after the other. Path regeneration (one loop over the vertices of all the
         samples, so that a GPU lane whose path ended starts its next sample at once; Novak
@@ -214,11 +216,12 @@ def make_render_pixel(features, target="cpu"):
         for s in range(sample_start, sample_start + n_samples):
             sr, sg, sb, nb, ns = render_sample(px, py, s, seed, width, height, max_bounces,
                                                rr_depth, scene, stack)
-            if not (math.isfinite(sr) and math.isfinite(sg) and math.isfinite(sb)):
+            if math.isfinite(sr) and math.isfinite(sg) and math.isfinite(sb):
+                r += sr
+                g += sg
+                b += sb
+            else:
                 n_bad += 1
-            r += sr
-            g += sg
-            b += sb
             n_bounce += nb
             n_shadow += ns
         out[py, px, 0] = r

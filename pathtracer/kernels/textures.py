@@ -59,8 +59,10 @@ def tex_lookup(tex_data, tex_int, tex_f, t, u, v):
     base = tex_int[t, TEX_FIRST]
     w = tex_int[t, TEX_WIDTH]
     h = tex_int[t, TEX_HEIGHT]
-    uu = u * tex_f[t, TEX_TILE] + tex_f[t, TEX_OFFSET]
-    vv = v * tex_f[t, TEX_TILE + 1] + tex_f[t, TEX_OFFSET + 1]
+    # Wrapped to [0, 1] first: a texel index is then small for any finite coordinate
+    # (a huge tile or uv would overflow int(floor(x)) and wreck the bilinear fractions).
+    uu = (u * tex_f[t, TEX_TILE] + tex_f[t, TEX_OFFSET]) % ONE
+    vv = (v * tex_f[t, TEX_TILE + 1] + tex_f[t, TEX_OFFSET + 1]) % ONE
     # (float32 sizes: int * float32 would promote to float64)
     x = uu * np.float32(w)
     y = (ONE - vv) * np.float32(h)           # image row 0 is the top

@@ -23,6 +23,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .. import limits
 from ..accel import build_bvh
 from ..kernels.envmap import environment_tables
 from ..kernels.layout import (CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_LENS_Y, CAM_ORIGIN,
@@ -42,6 +43,7 @@ from .images import load_texture, read_image, srgb_to_linear
 from .loader import (EnvironmentMap, SceneDescription, TextureSpec, euler_matrix,
                      load_scene_description)
 from .meshes import load_obj
+from ..memory import TRIANGLE_BYTES, require
 
 PRINCIPLED_NUMBERS = [p for p in MATERIAL_PARAMS if p.kind == "number"]
 DEFAULT_GREY = (0.5, 0.5, 0.5)   # objects without a material
@@ -62,6 +64,7 @@ class CompiledScene:
     timings: dict = field(default_factory=dict)   # seconds: mesh_load, bvh_build, total
     bvh_depth: int = 0
     origin_shift: tuple = (0.0, 0.0, 0.0)   # subtracted from all positions (float64)
+    warnings: list = field(default_factory=list)
 
 
 def load_scene(path, use_cache=True, allow_missing=False):
@@ -78,6 +81,7 @@ def compile_scene(desc, use_cache=True, bvh_options=None):
     objects, t_mesh = gather_geometry(desc, tables, mat_index, use_cache)
     mat, mat_tex, tex_data, tex_int, tex_f = tables.arrays()
     use_textures = len(tables.tex_images) > 0
+    _check_uvs(desc, objects, tables)
     use_tangents = any(o.uv is not None for o in objects) and (
         tables.any_normal_map or tables.any_anisotropic)
     tri = compile_triangles(objects, use_textures, use_tangents, bvh_options)
@@ -89,8 +93,12 @@ def compile_scene(desc, use_cache=True, bvh_options=None):
         environment=env.constant, smooth=tri.smooth, principled=tables.any_principled,
         textures=use_textures, normal_map=tables.any_normal_map and use_textures,
         tangents=use_tangents, env_map=env.has_map, thin_lens=desc.camera.lens_radius > 0)
+    cam = camera_array(desc.camera, tri.shift)
+    if not (np.isfinite(cam).all() and np.abs(cam).max() <= limits.FLOAT32_MAX):
+        raise SceneError("the camera's numbers overflow float32 (position, fov, aperture or "
+                         "focus distance)", desc.path, "/camera")
     arrays = SceneArrays(
-        cam=camera_array(desc.camera, tri.shift), tri_v=tri.tri_v, tri_n=tri.tri_n,
+        cam=cam, tri_v=tri.tri_v, tri_n=tri.tri_n,
         tri_mat=tri.tri_mat, mat=mat, tri_light_pdf=tri_light_pdf,
         light_cdf=lights.light_cdf, light_ref=lights.light_ref,
         point_lights=lights.point_lights, env=env.color, bvh_box=tri.bvh.box,
@@ -154,10 +162,20 @@ class MaterialTables:
         self.any_principled = False
         self._default = None
 
-    def texture(self, spec):
+    def texture(self, spec, slot=None):
+        """The index of the texture of ``spec`` (loaded once); ``slot``: the parameter it
+        feeds ('normalMap' allows negative texels; 'emission' and 'albedo' bound the
+        texel x scale products, see limits)."""
         key = (spec.path, spec.color_space, spec.filter, spec.tile, spec.offset, spec.scale)
         if key not in self.textures:
-            img = load_texture(spec, self.scene_file)
+            img = load_texture(spec, self.scene_file, allow_negative=slot == "normalMap")
+            top = float(np.abs(img).max(initial=0)) * max(spec.scale)
+            bound = {"emission": limits.MAX_RADIANCE, "albedo": limits.MAX_REFLECTANCE}.get(
+                slot, limits.MAX_RADIANCE)
+            if top > bound:
+                raise SceneError(f"texture {spec.path}: its largest value x scale = {top:g} "
+                                 f"exceeds {bound:g} (the bound of {slot or 'this value'})",
+                                 self.scene_file, spec.pointer)
             self.textures[key] = len(self.tex_images)
             self.tex_images.append(img)
             self.tex_params.append((spec.filter, spec.tile, spec.offset, spec.scale))
@@ -180,10 +198,10 @@ class MaterialTables:
         textures = textures or {}
         power = float(np.mean(emission))
         if "albedo" in textures:
-            tex[T_ALBEDO] = self.texture(textures["albedo"])
+            tex[T_ALBEDO] = self.texture(textures["albedo"], "albedo")
             row[M_ALBEDO:M_ALBEDO + 3] = textures["albedo"].scale
         if "emission" in textures:
-            t = self.texture(textures["emission"])
+            t = self.texture(textures["emission"], "emission")
             tex[T_EMISSION] = t
             row[M_EMISSION:M_EMISSION + 3] = textures["emission"].scale   # non-zero: emits
             power = float(np.mean(self.tex_images[t]) * np.mean(textures["emission"].scale))
@@ -194,13 +212,13 @@ class MaterialTables:
                 default = prm.default if prm.default is not None else 0.0
                 row[prm.column] = numbers.get(prm.key, default)
                 if prm.key in textures:
-                    tex[prm.slot] = self.texture(textures[prm.key])
+                    tex[prm.slot] = self.texture(textures[prm.key], prm.key)
             if "eta" not in numbers and "eta" not in textures:
                 row[M_ETA] = 0.0     # derived from specular in the kernel
             if row[M_ANISOTROPIC] > 0 or "anisotropic" in textures:
                 self.any_anisotropic = True
             if normal_map is not None:
-                tex[T_NORMAL] = self.texture(normal_map)
+                tex[T_NORMAL] = self.texture(normal_map, "normalMap")
                 self.any_normal_map = True
         self.rows.append(row)
         self.tex_rows.append(tex)
@@ -216,7 +234,9 @@ class MaterialTables:
             return (mat, mat_tex, np.zeros((1, 3), np.float32),
                     np.zeros((1, TEX_INT_WIDTH), np.int32), np.zeros((1, TEX_F_WIDTH), np.float32))
         sizes = [im.shape[0] * im.shape[1] for im in self.tex_images]
-        tex_data = np.concatenate([im.reshape(-1, 3) for im in self.tex_images])
+        # (one texture: a view, not a copy; the texels are float32 already)
+        tex_data = (self.tex_images[0].reshape(-1, 3) if len(self.tex_images) == 1 else
+                    np.concatenate([im.reshape(-1, 3) for im in self.tex_images]))
         tex_int = np.zeros((len(sizes), TEX_INT_WIDTH), np.int32)
         tex_f = np.zeros((len(sizes), TEX_F_WIDTH), np.float32)
         offs = np.concatenate([[0], np.cumsum(sizes)[:-1]])
@@ -232,7 +252,7 @@ class MaterialTables:
             tex_f[i, TEX_TILE:TEX_TILE + 2] = tile
             tex_f[i, TEX_OFFSET:TEX_OFFSET + 2] = offset
             tex_f[i, TEX_SCALE:TEX_SCALE + 3] = scale
-        return mat, mat_tex, tex_data.astype(np.float32), tex_int, tex_f
+        return mat, mat_tex, np.ascontiguousarray(tex_data, np.float32), tex_int, tex_f
 
 
 def compile_materials(desc):
@@ -253,6 +273,7 @@ def obj_material(tables, mm, obj_dir, scene_file, where):
     if mm.get("undefined"):
         raise SceneError(f"usemtl {mm['name']!r}: no such material in the .mtl file(s) (or "
                          "give the object a 'material')", scene_file, where)
+    _check_mtl(mm, scene_file, where)
     specular = any(x > 0 for x in mm["Ks"]) or mm.get("Pr") is not None or \
         mm.get("Pm") is not None
     textures = {}
@@ -281,6 +302,45 @@ def obj_material(tables, mm, obj_dir, scene_file, where):
         numbers["eta"] = mm["Ni"]
     return tables.add("principled", tuple(mm["Kd"]), tuple(mm["Ke"]), False, numbers,
                       textures, normal_map)
+
+
+def _check_uvs(desc, objects, tables):
+    """A textured material (a normal map included) on a mesh without texture coordinates
+    would look up one texel everywhere: an error rather than a silently wrong image."""
+    slot_names = {p.slot: p.key for p in MATERIAL_PARAMS}
+    slot_names[T_NORMAL] = "normalMap"
+    for obj, geo in zip(desc.objects, objects):
+        if geo.uv is not None or not len(geo.materials):
+            continue
+        for row in np.unique(geo.materials):
+            used = [slot_names.get(k, str(k)) for k in np.nonzero(
+                tables.tex_rows[row] != NO_TEXTURE)[0]]
+            if used:
+                what = "its OBJ file has no 'vt' lines" if obj.file else \
+                    "inline meshes have none"
+                raise SceneError(f"a material with textures ({', '.join(used)}) is used on an "
+                                 f"object without texture coordinates ({what}): give the mesh "
+                                 "UVs or use a material without textures", desc.path,
+                                 obj.pointer)
+
+
+# The ranges of .mtl values (as the scene's own: see limits and the parameter table).
+MTL_RANGES = {"Kd": (0.0, limits.MAX_REFLECTANCE), "Ks": (0.0, limits.MAX_REFLECTANCE),
+              "Ke": (0.0, limits.MAX_RADIANCE), "Ns": (0.0, limits.FLOAT32_MAX),
+              "Ni": (0.0, limits.FLOAT32_MAX), "Pr": (0.0, 1.0), "Pm": (0.0, 1.0)}
+
+
+def _check_mtl(mm, scene_file, where):
+    """Every number of a .mtl material finite and in range (pywavefront reads 'nan' and
+    negative values as given)."""
+    for key, (lo, hi) in MTL_RANGES.items():
+        v = mm.get(key)
+        if v is None:
+            continue
+        for x in (v if isinstance(v, (list, tuple)) else [v]):
+            if not (isinstance(x, (int, float)) and math.isfinite(x) and lo <= x <= hi):
+                raise SceneError(f".mtl material {mm['name']!r}: {key} must be within "
+                                 f"[{lo:g}, {hi:g}], got {x}", scene_file, where)
 
 
 # ---------------------------------------------------------------------------------------
@@ -348,8 +408,13 @@ def _to_world(obj, desc, pos, file_normals, uv, mats):
             file_normals = file_normals[:, [0, 2, 1]]
         if uv is not None:
             uv = uv[:, [0, 2, 1]]
-    if not np.isfinite(pos).all() or np.abs(pos).max(initial=0) > 1e30:
-        raise SceneError("transformed vertex coordinates overflow", desc.path, where)
+    if not np.isfinite(pos).all() or np.abs(pos).max(initial=0) > limits.MAX_COORDINATE:
+        raise SceneError(f"transformed vertex coordinates overflow (|x| <= "
+                         f"{limits.MAX_COORDINATE:g})", desc.path, where)
+    if uv is not None and not (np.isfinite(uv).all() and
+                               np.abs(uv).max(initial=0) <= limits.FLOAT32_MAX):
+        raise SceneError("texture coordinates contain NaN, infinite or float32-overflowing "
+                         "values", desc.path, f"{where}/file")
     face_n = np.cross(pos[:, 1] - pos[:, 0], pos[:, 2] - pos[:, 0])
     face_n = safe_normalize(face_n, np.array([0.0, 0.0, 1.0]))
     if obj.smooth:
@@ -407,6 +472,8 @@ def compile_triangles(objects, use_textures, use_tangents, bvh_options=None):
     shift = np.zeros(3)
     if len(pos):
         shift = 0.5 * (pos.reshape(-1, 3).min(axis=0) + pos.reshape(-1, 3).max(axis=0))
+    require(len(pos) * TRIANGLE_BYTES, f"{len(pos)} triangles",
+            "use fewer or simpler meshes", error=SceneError)
     pos32 = (pos - shift).astype(np.float32)
 
     # BVH; triangles reordered so each leaf is a contiguous range
@@ -489,7 +556,12 @@ def _environment_map_tables(env, scene_file):
     img, is_float = read_image(env.path, env.pointer, scene_file)
     if not is_float:
         img = srgb_to_linear(img)
-    return environment_tables(np.maximum(img, 0.0) * env.intensity)
+    top = float(img.max(initial=0)) * env.intensity
+    if top > limits.MAX_RADIANCE:
+        raise SceneError(f"environment map {env.path}: its brightest texel x intensity = "
+                         f"{top:g} exceeds the largest radiance, {limits.MAX_RADIANCE:g}",
+                         scene_file, env.pointer)
+    return environment_tables(img * env.intensity)
 
 
 # ---------------------------------------------------------------------------------------

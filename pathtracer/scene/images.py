@@ -1,40 +1,94 @@
 """Texture and environment images: read (through the film's one reader), checked, made RGB."""
 import numpy as np
 
-from ..film import read_pixels, srgb_to_linear
+from ..film import read_raw, srgb_to_linear
+from ..memory import TEXEL_BYTES, require
 from .errors import SceneError
 
 __all__ = ["read_image", "load_texture", "srgb_to_linear"]
 
 
-def read_image(path, where=None, scene_file=None):
-    """float64 (H, W, 3) pixels and whether they are already linear floats (HDR); any
-    failure is a SceneError naming the file and the scene key."""
+def _decode(path, where, scene_file):
+    """Raw pixels (H, W, C) as decoded, whether they are floats; any failure is a
+    SceneError naming the file and the scene key."""
     try:
-        img, is_float = read_pixels(path)
-    except Exception as e:
-        raise SceneError(f"cannot read image {path}: {e}", scene_file or path,
+        img, is_float = read_raw(path)
+    except MemoryError:
+        raise SceneError(f"image {path}: not enough memory to decode it", scene_file or path,
                          where) from None
+    except Exception as e:   # each codec reports a damaged file with its own type
+        raise SceneError(f"cannot read image {path}: {' '.join(str(e).split()) or type(e).__name__}",
+                         scene_file or path, where) from None
     if img.ndim == 2:
         img = img[:, :, None]
-    if img.ndim != 3 or img.shape[0] == 0 or img.shape[1] == 0:
+    if img.ndim != 3 or img.shape[0] == 0 or img.shape[1] == 0 or img.shape[2] == 0:
         raise SceneError(f"image {path} has an unexpected shape {img.shape}",
                          scene_file or path, where)
-    if img.shape[2] == 1:
-        img = np.repeat(img, 3, axis=2)
-    elif img.shape[2] == 2:            # grey + alpha
-        img = np.repeat(img[:, :, :1], 3, axis=2)
-    else:
-        img = img[:, :, :3]
-    if not np.isfinite(img).all():
-        raise SceneError(f"image {path} contains NaN or infinite values", scene_file or path,
-                         where)
     return img, is_float
 
 
-def load_texture(spec, scene_file=None):
-    """Linear float32 (H, W, 3) texels of a TextureSpec."""
-    img, is_float = read_image(spec.path, spec.pointer, scene_file)
+def _rgb(img):
+    if img.shape[2] == 1:
+        return np.repeat(img, 3, axis=2)
+    if img.shape[2] == 2:            # grey + alpha
+        return np.repeat(img[:, :, :1], 3, axis=2)
+    return img[:, :, :3]
+
+
+def _check_values(img, path, where, scene_file, allow_negative):
+    if img.dtype.kind == "f" and not np.isfinite(img).all():
+        raise SceneError(f"image {path} contains NaN or infinite values", scene_file or path,
+                         where)
+    if not allow_negative and img.dtype.kind == "f" and (img < 0).any():
+        raise SceneError(f"image {path} contains negative values (as light or reflectance "
+                         f"they must be >= 0; the smallest is {float(img.min()):g})",
+                         scene_file or path, where)
+
+
+def read_image(path, where=None, scene_file=None):
+    """float64 (H, W, 3) pixels (integer formats scaled to [0, 1], not decoded) and whether
+    they are already linear floats (HDR); values must be finite and >= 0."""
+    img, is_float = _decode(path, where, scene_file)
+    img = _rgb(img)
+    _check_values(img, path, where, scene_file, allow_negative=False)
+    if img.dtype.kind in "ui":
+        return img.astype(np.float64) / np.iinfo(img.dtype).max, False
+    return img.astype(np.float64), is_float
+
+
+_SRGB_LUT = {}
+
+
+def _lut(dtype, srgb):
+    """The float32 value of every code of an 8- or 16-bit integer type (sRGB-decoded or
+    linear): such textures decode by table lookup, with no float64 copy of the image."""
+    key = (np.dtype(dtype), srgb)
+    if key not in _SRGB_LUT:
+        top = np.iinfo(dtype).max
+        values = np.arange(top + 1) / top
+        _SRGB_LUT[key] = (srgb_to_linear(values) if srgb else values).astype(np.float32)
+    return _SRGB_LUT[key]
+
+
+def load_texture(spec, scene_file=None, allow_negative=False):
+    """Linear float32 (H, W, 3) texels of a TextureSpec. Values must be finite and, unless
+    ``allow_negative`` (normal maps), >= 0. Decoding keeps to float32 (an 8192^2 8-bit
+    texture peaks near 1 GB, not 6.6 GB)."""
+    img, is_float = _decode(spec.path, spec.pointer, scene_file)
+    h, w = img.shape[:2]
+    require(h * w * TEXEL_BYTES, f"texture {spec.path} ({w}x{h})",
+            "use a smaller texture", error=lambda m: SceneError(m, scene_file or spec.path,
+                                                                spec.pointer))
+    img = _rgb(img)
+    _check_values(img, spec.path, spec.pointer, scene_file, allow_negative)
+    if img.dtype.kind in "ui" and img.dtype.itemsize <= 2:
+        return _lut(img.dtype, spec.color_space == "sRGB")[img]
+    if img.dtype.kind in "ui":
+        img = img.astype(np.float64) / np.iinfo(img.dtype).max
+        is_float = False
     if spec.color_space == "sRGB" and not is_float:
         img = srgb_to_linear(img)
-    return img.astype(np.float32)
+    if img.dtype.kind == "f" and np.abs(img).max(initial=0) > np.finfo(np.float32).max:
+        raise SceneError(f"image {spec.path} has values beyond the float32 range",
+                         scene_file or spec.path, spec.pointer)
+    return np.asarray(img, np.float32)

@@ -14,6 +14,7 @@ from typing import Optional
 
 import numpy as np
 
+from .. import limits
 from ..kernels.layout import MATERIAL_PARAMS, PARAM_BY_KEY
 from .errors import SceneError
 
@@ -183,19 +184,15 @@ class Node:
             return default
         return _triple(self.raw(key), self.file, self.path(key), ("x", "y", "z"), False)
 
-    def color(self, key, default=None):
-        """Linear RGB, >= 0: [r, g, b], a number (grey), {r, g, b} or {x, y, z}."""
+    def color(self, key, default=None, hi=None):
+        """Linear RGB, >= 0 (and <= hi): [r, g, b], a number (grey), {r, g, b} or
+        {x, y, z}."""
         if key not in self.value:
             return default
         v = self.raw(key)
         if isinstance(v, (str, dict)) and (isinstance(v, str) or "texture" in v):
             raise SceneError("a texture is not allowed here", self.file, self.path(key))
-        c = _triple(v, self.file, self.path(key), None, True)
-        for i, x in enumerate(c):
-            if x < 0:
-                raise SceneError(f"colour components must be >= 0, got {x}", self.file,
-                                 self.path(key))
-        return c
+        return _color(v, self.file, self.path(key), hi)
 
     def node(self, key):
         return Node(self.raw(key), self.path(key), self.file)
@@ -229,10 +226,31 @@ def _kind(v):
 def _number(v, file, pointer):
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise SceneError(f"expected a number, got {_kind(v)}", file, pointer)
-    v = float(v)
+    try:
+        v = float(v)
+    except OverflowError:     # an integer beyond float64
+        raise SceneError("expected a finite number, got an integer too large for a float",
+                         file, pointer) from None
     if not math.isfinite(v):
         raise SceneError(f"expected a finite number, got {v}", file, pointer)
+    if abs(v) > limits.FLOAT32_MAX:
+        raise SceneError(f"{v:g} is outside the float32 range (|x| <= 3.4e38) the renderer "
+                         "computes in", file, pointer)
     return v
+
+
+def _color(v, file, pointer, hi=None, what="colour components"):
+    c = _triple(v, file, pointer, None, True)
+    for x in c:
+        if x < 0:
+            raise SceneError(f"{what} must be >= 0, got {x}", file, pointer)
+        if hi is not None and x > hi:
+            raise SceneError(f"{what} must be <= {hi:g}, got {x:g}", file, pointer)
+    return c
+
+
+# The upper bounds of colours by what they mean (see pathtracer.limits).
+COLOR_LIMITS = {"albedo": limits.MAX_REFLECTANCE, "emission": limits.MAX_RADIANCE}
 
 
 def _check_range(v, lo, hi, lo_open, file, pointer):
@@ -281,10 +299,16 @@ def _strict_json(path):
             text = f.read()
     except FileNotFoundError:
         raise SceneError("scene file not found", path) from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise SceneError(f"cannot read: {e}", path) from None
+    except IsADirectoryError:
+        raise SceneError("is a folder, not a scene file", path) from None
+    except UnicodeDecodeError as e:
+        raise SceneError(f"not UTF-8 text (byte {e.start}: {e.reason})", path) from None
+    except OSError as e:
+        raise SceneError(f"cannot read: {e.strerror or e}", path) from None
     try:
         return json.loads(text, parse_constant=no_constant, object_pairs_hook=no_duplicates)
+    except RecursionError:
+        raise SceneError("invalid JSON: nested too deeply", path) from None
     except json.JSONDecodeError as e:
         raise SceneError(f"invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}",
                          path) from None
@@ -341,8 +365,9 @@ def _describe(data, path):
               for i, v in enumerate(root.items("lights"))]
     for i, v in enumerate(root.items("pointLights")):   # thesis alias
         n = Node(v, f"/pointLights/{i}", path)
-        pos = n.vector("position", (0.0, 0.0, 0.0))
-        lights.append(PointLight(pos, n.color("radiance", (1.0, 1.0, 1.0))))
+        pos = _coordinate(n, "position", (0.0, 0.0, 0.0))
+        lights.append(PointLight(pos, n.color("radiance", (1.0, 1.0, 1.0),
+                                               hi=limits.MAX_RADIANCE)))
         n.finish()
     environment = None
     if root.has("environment"):
@@ -366,10 +391,14 @@ def _camera(n, sensor_default=0.036):
         cam.resolution = tuple(_positive_int(x, n.file, f"{n.path('resolution')}/{i}")
                                for i, x in enumerate(v))
     else:
-        cam.resolution = (n.integer("xRes", cam.resolution[0], lo=1),
-                          n.integer("yRes", cam.resolution[1], lo=1))
-    cam.position = n.vector("position", cam.position)
-    cam.look_at = n.vector("lookAt", None)
+        cam.resolution = (n.integer("xRes", cam.resolution[0], lo=1, hi=limits.MAX_DIMENSION),
+                          n.integer("yRes", cam.resolution[1], lo=1, hi=limits.MAX_DIMENSION))
+    if cam.resolution[0] * cam.resolution[1] > limits.MAX_PIXELS:
+        raise n.error(f"at most {limits.MAX_PIXELS} pixels, got "
+                      f"{cam.resolution[0] * cam.resolution[1]}",
+                      "resolution" if n.has("resolution") else "xRes")
+    cam.position = _coordinate(n, "position", cam.position)
+    cam.look_at = _coordinate(n, "lookAt", None)
     cam.up = n.vector("up", cam.up)
     cam.rotation = n.vector("rotation", cam.rotation)
     if n.has("lookAt") and n.has("rotation"):
@@ -386,33 +415,58 @@ def _camera(n, sensor_default=0.036):
         if n.has("fov"):
             raise n.error("give 'fov' or 'focalLength', not both", "focalLength")
         focal = n.number("focalLength", lo=0, lo_open=True)
-        cam.fov = math.degrees(2 * math.atan(sensor_width / (2 * focal)))
+        tan_half = sensor_width / (2 * focal)
+        cam.fov = math.degrees(2 * math.atan(tan_half))
+        fov_key = "focalLength"
     else:
         cam.fov = n.number("fov", cam.fov, lo=0, lo_open=True)
         if cam.fov >= 180:
             raise n.error(f"must be < 180 degrees, got {cam.fov}", "fov")
-        focal = sensor_width / (2 * math.tan(math.radians(cam.fov) / 2))
+        tan_half = math.tan(math.radians(cam.fov) / 2)
+        focal = sensor_width / (2 * tan_half)
+        fov_key = "fov"
+    # (limits: float32 ray directions lose the image's extent outside this range)
+    if not limits.MIN_TAN_HALF_FOV <= tan_half <= limits.MAX_TAN_HALF_FOV:
+        lo = math.degrees(2 * math.atan(limits.MIN_TAN_HALF_FOV))
+        hi = math.degrees(2 * math.atan(limits.MAX_TAN_HALF_FOV))
+        raise n.error(f"the field of view must be within [{lo:.6g}, {hi:.7g}] degrees, got "
+                      f"{cam.fov:.9g}", fov_key)
     cam.aperture = n.number("aperture", 0.0, lo=0)
-    cam.focus_distance = n.number("focusDistance", 1.0, lo=0, lo_open=True)
+    cam.focus_distance = n.number("focusDistance", 1.0, lo=0, lo_open=True,
+                                  hi=limits.MAX_COORDINATE)
     # f-number -> lens radius (scene units: focalLength and sensorWidth are metres)
     cam.lens_radius = focal / (2 * cam.aperture) if cam.aperture > 0 else 0.0
+    if cam.lens_radius > limits.MAX_COORDINATE:
+        raise n.error(f"the lens radius focalLength / (2 aperture) = {cam.lens_radius:g} "
+                      f"exceeds {limits.MAX_COORDINATE:g}", "aperture")
     n.finish()
     return cam
 
 
-def _positive_int(v, file, pointer):
+def _coordinate(n, key, default):
+    """A position: a vector with every |component| <= limits.MAX_COORDINATE."""
+    v = n.vector(key, default)
+    if v is not None and max(abs(x) for x in v) > limits.MAX_COORDINATE:
+        raise n.error(f"coordinates must be within +-{limits.MAX_COORDINATE:g}, got "
+                      f"{max(v, key=abs):g}", key)
+    return v
+
+
+def _positive_int(v, file, pointer, hi=limits.MAX_DIMENSION):
     if isinstance(v, bool) or not isinstance(v, (int, float)) or (
             isinstance(v, float) and not v.is_integer()) or v < 1:
         raise SceneError(f"expected a positive integer, got {_kind(v)}", file, pointer)
+    if v > hi:
+        raise SceneError(f"must be <= {hi}, got {v:g}", file, pointer)
     return int(v)
 
 
 def _render(n):
     r = RenderSettings(
-        spp=n.integer("spp", 64, lo=1),
-        max_bounces=n.integer("maxBounces", 8, lo=0, hi=1000),
-        rr_depth=n.integer("rrDepth", 5, lo=0),
-        seed=n.integer("seed", 0, lo=0, hi=2**32 - 1))
+        spp=n.integer("spp", 64, lo=1, hi=limits.MAX_SPP),
+        max_bounces=n.integer("maxBounces", 8, lo=0, hi=limits.MAX_BOUNCES),
+        rr_depth=n.integer("rrDepth", 5, lo=0, hi=limits.MAX_BOUNCES),
+        seed=n.integer("seed", 0, lo=0, hi=limits.MAX_SEED))
     n.finish()
     return r
 
@@ -426,9 +480,10 @@ def _material(n, base):
         raise n.error("give 'albedo' or 'baseColor', not both", "baseColor")
     m = Material(name=name, type=mtype, pointer=n.pointer)
     key = "albedo" if n.has("albedo") or not n.has("baseColor") else "baseColor"
-    m.albedo = _color_or_texture(n, key, ALBEDO_DEFAULT, base, "sRGB", m, "albedo")
+    m.albedo = _color_or_texture(n, key, ALBEDO_DEFAULT, base, "sRGB", m, "albedo",
+                                 COLOR_LIMITS["albedo"])
     m.emission = _color_or_texture(n, "emission", EMISSION_DEFAULT, base, "sRGB", m,
-                                   "emission")
+                                   "emission", COLOR_LIMITS["emission"])
     m.two_sided = n.boolean("twoSided", False)
     if mtype == "principled":
         if n.has("eta") and n.has("specular"):
@@ -454,14 +509,14 @@ def _material(n, base):
     return m
 
 
-def _color_or_texture(n, key, default, base, color_space, material, slot):
+def _color_or_texture(n, key, default, base, color_space, material, slot, hi):
     if not n.has(key):
         return default
     v = n.raw(key)
     if isinstance(v, str) or (isinstance(v, dict) and "texture" in v):
         material.textures[slot] = _texture_spec(n, key, base, color_space)
         return (1.0, 1.0, 1.0)
-    return n.color(key, default)
+    return n.color(key, default, hi=hi)
 
 
 TEXTURE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".hdr", ".exr", ".tga", ".tif",
@@ -478,6 +533,9 @@ def _texture_spec(n, key, base, color_space):
     else:
         t = Node(v, where, n.file)
         p = t.string("texture")
+        if p is None:
+            raise t.error("missing required key 'texture' (a texture is a path string or "
+                          "an object with 'texture')")
         spec = TextureSpec(path=_texture_path(p, base, n.file, t.path("texture")),
                            color_space=t.string("colorSpace", color_space,
                                                 choices=("sRGB", "linear")),
@@ -487,7 +545,8 @@ def _texture_spec(n, key, base, color_space):
         spec.tile = _pair(t, "tile", (1.0, 1.0))
         spec.offset = _pair(t, "offset", (0.0, 0.0))
         if t.has("scale"):
-            spec.scale = _triple(t.raw("scale"), t.file, t.path("scale"), None, True)
+            spec.scale = _color(t.raw("scale"), t.file, t.path("scale"), limits.MAX_RADIANCE,
+                                "scale components")
         t.finish()
     return spec
 
@@ -508,7 +567,11 @@ def _pair(n, key, default):
     v = n.raw(key)
     if not isinstance(v, list) or len(v) != 2:
         raise n.error("expected [u, v]", key)
-    return tuple(_number(x, n.file, f"{n.path(key)}/{i}") for i, x in enumerate(v))
+    out = tuple(_number(x, n.file, f"{n.path(key)}/{i}") for i, x in enumerate(v))
+    for i, x in enumerate(out):
+        # beyond this, float32 texture coordinates keep no fraction to look up
+        _check_range(abs(x), None, limits.MAX_UV, False, n.file, f"{n.path(key)}/{i}")
+    return out
 
 
 def _object(n, base, materials):
@@ -559,6 +622,8 @@ def _array(n, key, kind, width):
             else:
                 if isinstance(x, bool) or not isinstance(x, int):
                     raise SceneError(f"expected an integer index, got {_kind(x)}", n.file, p)
+                if not 0 <= x < 2 ** 31:
+                    raise SceneError(f"vertex index {x} out of range", n.file, p)
                 out[i, j] = x
     return out
 
@@ -607,7 +672,8 @@ def _point_light(n):
     n.string("type", "point", choices=("point",))
     if not n.has("position"):
         raise n.error("missing required key 'position'")
-    light = PointLight(n.vector("position"), n.color("intensity", (1.0, 1.0, 1.0)))
+    light = PointLight(_coordinate(n, "position", None),
+                       n.color("intensity", (1.0, 1.0, 1.0), hi=limits.MAX_RADIANCE))
     n.finish()
     return light
 
@@ -628,7 +694,7 @@ def _environment(n, base, thesis=False):
         rotation = 360.0 * (x_off - 0.25)
     else:
         rotation = n.number("rotation", 0.0)
-    intensity = n.number("intensity", 1.0, lo=0)
+    intensity = n.number("intensity", 1.0, lo=0, hi=limits.MAX_RADIANCE)
     if n.has(file_key):
         name = n.string(file_key)
         path = os.path.join(base, "HDRI", name + ".hdr") if thesis else os.path.join(base, name)
@@ -640,4 +706,8 @@ def _environment(n, base, thesis=False):
         raise n.error(f"needs 'color' or '{file_key}'")
     color = n.color("color")
     n.finish()
-    return tuple(c * intensity for c in color)
+    radiance = tuple(c * intensity for c in color)
+    if max(radiance) > limits.MAX_RADIANCE:
+        raise n.error(f"color x intensity = {max(radiance):g} exceeds the largest radiance, "
+                      f"{limits.MAX_RADIANCE:g}", "color")
+    return radiance

@@ -18,7 +18,7 @@ import numpy as np
 
 from .errors import SceneError
 
-CACHE_VERSION = 4
+CACHE_VERSION = 5
 
 
 @dataclass
@@ -92,7 +92,8 @@ def _write_cache(cpath, mesh):
                      materials=json.dumps(mesh.materials))
         os.replace(tmp, cpath)
     except OSError as e:   # a read-only cache folder only costs speed
-        logging.getLogger("pt-render").warning("mesh cache not written (%s)", e)
+        from .._cache import warn
+        warn(f"mesh cache not written ({e.strerror or e}); the mesh will be parsed again next run")
 
 
 def _parse(path):
@@ -101,9 +102,16 @@ def _parse(path):
     try:
         scene = pywavefront.Wavefront(path, collect_faces=True, create_materials=True,
                                       parse=True)
-    except IndexError:
-        raise SceneError("a face refers to a vertex, normal or texture coordinate index "
-                         "that is out of range", path) from None
+    except (IndexError, ValueError) as e:
+        if _mixed_face_forms(path):
+            raise SceneError("faces of one material mix the forms v, v/vt, v//vn and "
+                             "v/vt/vn; the OBJ reader (pywavefront) needs one form per "
+                             "material: export with UVs and normals on every face",
+                             path) from None
+        if isinstance(e, IndexError):
+            raise SceneError("a face refers to a vertex, normal or texture coordinate "
+                             "index that is out of range", path) from None
+        raise SceneError(f"invalid OBJ: {e}", path) from None
     except FileNotFoundError as e:
         raise SceneError(f"file not found: {e.filename or e}", path) from None
     except Exception as e:   # pywavefront reports malformed lines with various types
@@ -113,7 +121,7 @@ def _parse(path):
             raise SceneError("a face refers to a vertex index that is out of range", path)
     positions, normals, uvs, face_mat, materials = [], [], [], [], []
     all_have_normals = True
-    all_have_uvs = True
+    any_uvs = any("T2F" in m.vertex_format for m in scene.materials.values() if m.vertices)
     extra = _mtl_extras(path)
     for mat in scene.materials.values():
         if not mat.vertices:
@@ -124,9 +132,12 @@ def _parse(path):
         for part in fmt:
             offsets[part] = stride
             stride += sizes[part]
-        v = np.asarray(mat.vertices, dtype=np.float32).reshape(-1, stride)
-        if len(v) % 3:
-            raise SceneError("incomplete face data", path)
+        if len(mat.vertices) % (3 * stride):
+            # pywavefront leaves out the value of an index past the end of its list
+            raise SceneError("a face refers to a texture coordinate or normal index that is "
+                             "out of range, or a face has fewer than 3 vertices", path)
+        with np.errstate(over="ignore"):     # > float32 range: inf, refused later
+            v = np.asarray(mat.vertices, dtype=np.float32).reshape(-1, stride)
         o = offsets["V3F"]
         positions.append(v[:, o:o + 3].reshape(-1, 3, 3))
         if "N3F" in offsets:
@@ -138,7 +149,9 @@ def _parse(path):
             o = offsets["T2F"]
             uvs.append(v[:, o:o + 2].reshape(-1, 3, 2))
         else:
-            all_have_uvs = False
+            # faces of a material without vt: (0, 0), so that the other materials keep
+            # theirs (a textured material without vt is refused by the compiler)
+            uvs.append(np.zeros((len(v) // 3, 3, 2), np.float32))
         # pywavefront names faces without `usemtl` "default<N>"; those get no material.
         index = -1 if (mat.is_default and re.fullmatch(r"default\d+", mat.name)) else len(materials)
         if index >= 0:
@@ -158,8 +171,24 @@ def _parse(path):
         return ObjMesh(np.zeros((0, 3, 3), np.float32), None, None, np.zeros(0, np.int32), [])
     return ObjMesh(np.concatenate(positions),
                    np.concatenate(normals) if all_have_normals and normals else None,
-                   np.concatenate(uvs) if all_have_uvs and uvs else None,
+                   np.concatenate(uvs) if any_uvs else None,
                    np.concatenate(face_mat), materials)
+
+
+def _mixed_face_forms(path):
+    """Do the face lines of ``path`` use more than one index form (v, v/vt, v//vn,
+    v/vt/vn)? Only to explain a failure of the reader."""
+    forms = set()
+    try:
+        with open(path, "rb") as f:
+            for line in f:
+                if line.startswith(b"f ") or line.startswith(b"f\t"):
+                    for token in line.split()[1:]:
+                        parts = token.split(b"/")
+                        forms.add((len(parts) > 1 and parts[1] != b"", len(parts) > 2))
+    except OSError:
+        return False
+    return len(forms) > 1
 
 
 def _mtl_extras(path):

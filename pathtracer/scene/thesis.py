@@ -43,14 +43,22 @@ def read_lenient(path, warnings):
         import json5
     except ImportError:   # pragma: no cover - a declared dependency
         raise SceneError("reading thesis scene folders needs the json5 package", path)
-    with open(path, "r", encoding="utf-8") as f:
-        text = f.read()
+    try:
+        with open(path, "r", encoding="utf-8") as f:
+            text = f.read()
+    except UnicodeDecodeError as e:
+        raise SceneError(f"not UTF-8 text (byte {e.start}: {e.reason})", path) from None
+    except OSError as e:
+        raise SceneError(f"cannot read: {e.strerror or e}", path) from None
     if UNIT_RE.search(text):
         line = text.count("\n", 0, UNIT_RE.search(text).start()) + 1
         warnings.append(f"{path}: line {line}: dropped a unit suffix 'm' after a number")
         text = UNIT_RE.sub("", text)
     try:
         return json5.loads(text, allow_duplicate_keys=False)
+    except RecursionError:
+        raise SceneError("cannot parse (thesis JSON dialect): nested too deeply", path) \
+            from None
     except ValueError as e:
         raise SceneError(f"cannot parse (thesis JSON dialect): {e}", path) from None
 
