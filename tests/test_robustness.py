@@ -332,7 +332,7 @@ def test_failing_periodic_save_warns_and_the_final_save_succeeds(tmp_path, capsy
 
     def flaky(paths, image):
         calls.append(paths)
-        if len(calls) <= 2:
+        if len(calls) == 1:      # the first save is a periodic one (at >= 1 s of 2.5)
             raise OSError(28, "No space left on device")
         return real(paths, image)
 
@@ -341,7 +341,7 @@ def test_failing_periodic_save_warns_and_the_final_save_succeeds(tmp_path, capsy
     rc, err = run_cli([path, "--backend", "python", "--time", 2.5, "--quiet",
                        "-o", tmp_path / "o.png"], capsys)
     assert rc == 0, err
-    assert len(calls) >= 3 and "No space left on device" in err and "retries" in err
+    assert len(calls) >= 2 and "No space left on device" in err and "retries" in err
     assert (tmp_path / "o.png").exists() and (tmp_path / "o.exr").exists()
 
 
