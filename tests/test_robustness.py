@@ -517,3 +517,30 @@ def test_full_disk_while_writing_the_cache_still_runs(tmp_path):
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == str(3 * 999 * 1000 // 2)
     assert "could not write the kernel cache" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_unsupported_mesh_format_is_an_error(tmp_path, capsys):
+    (tmp_path / "m.stl").write_text("solid m\nendsolid m\n")
+    scene = {"camera": {"resolution": [4, 3]}, "objects": [{"name": "m", "file": "m.stl"}]}
+    rc, err = run_cli([write_scene(tmp_path, scene), "--backend", "python", "--quiet",
+                       "-o", tmp_path / "o.npy"], capsys)
+    assert_one_line_error(rc, err)
+    assert "/objects/0/file" in err and ".stl" in err
+
+
+def test_mesh_cache_resolves_mtl_textures_per_folder(tmp_path, monkeypatch):
+    """The same OBJ + MTL in two folders: each names its own folder's texture (a cache
+    keyed by content alone handed the second the first folder's paths)."""
+    from pathtracer.scene.meshes import load_obj
+    monkeypatch.setenv("PT_RENDER_CACHE", str(tmp_path / "cache"))
+    paths = []
+    for name in ("a", "b"):
+        d = tmp_path / name
+        d.mkdir()
+        (d / "m.mtl").write_text("newmtl t\nKd 1 1 1\nmap_Kd tex.png\n")
+        (d / "m.obj").write_text("mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nvt 0 0\nvt 1 0\n"
+                                 "vt 1 1\nusemtl t\nf 1/1 2/2 3/3\n")
+        mesh = load_obj(str(d / "m.obj"))
+        paths.append(os.path.join(str(d), mesh.materials[0]["map_Kd"]))
+    assert os.path.dirname(paths[0]) == str(tmp_path / "a")
+    assert os.path.dirname(paths[1]) == str(tmp_path / "b")

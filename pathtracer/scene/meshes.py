@@ -39,6 +39,9 @@ def cache_dir():
 def _cache_key(path, data):
     h = hashlib.sha256()
     h.update(f"v{CACHE_VERSION}".encode())
+    # The folder too: the .mtl's texture paths are resolved against it, so the same files
+    # in another folder name other textures.
+    h.update(os.path.dirname(os.path.abspath(path)).encode())
     h.update(data)
     # The .mtl files change the material table: hash them too.
     for m in re.findall(rb"^[ \t]*mtllib[ \t]+(.+?)[ \t]*$", data, re.M):
