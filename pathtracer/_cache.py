@@ -16,7 +16,7 @@ A cache must never cost a render:
   not seen (a stale image); :func:`jit_cache` tells every decorator whether to cache.
 - **Damaged files** (a truncated or corrupt index or binary): Numba raises an unpickling
   error on load. :func:`install_guards` wraps Numba's load so that a failure moves the
-  kernel folder aside (``<folder>.damaged-<time>``), warns once, and compiles afresh into
+  damaged folder aside (``<folder>.damaged-<time>``), warns once, and compiles afresh into
   a new folder.
 - **Failed writes** (disk full): the kernel is used uncached, with one warning.
 """
@@ -103,10 +103,11 @@ def _ours(cache):
         os.path.abspath(folder) + os.sep)
 
 
-def _quarantine(error):
-    """Move the damaged kernel folder aside; later loads miss and recompile, and saves
-    recreate the folder."""
-    folder = _state["folder"]
+def _quarantine(cache, error):
+    """Move the damaged cache folder (the one of this function's source folder, not the
+    whole cache root: that may be a user's NUMBA_CACHE_DIR shared with other projects)
+    aside; later loads miss and recompile, and Numba's save recreates the folder."""
+    folder = os.path.abspath(cache._cache_path)
     aside = f"{folder}.damaged-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}"
     try:
         os.replace(folder, aside)
@@ -129,7 +130,7 @@ def _guarded(cls):
         try:
             return load(self, sig, target_context)
         except Exception as e:    # unpickling errors of every kind: a damaged file
-            _quarantine(e)
+            _quarantine(self, e)
             return None           # a cache miss: Numba compiles
 
     def save_overload(self, sig, data):

@@ -5,6 +5,7 @@ an output cannot be written, 128 + N when signal N stopped the render (after sav
 for a bug. ``--debug`` adds the traceback.
 """
 import argparse
+import contextlib
 import csv
 import math
 import os
@@ -17,7 +18,7 @@ import traceback
 from . import limits
 from .errors import (EXIT_INPUT, EXIT_INTERNAL, EXIT_IO, EXIT_OK, InputError, Interrupted,
                      OutputError)
-from .film import ALL_FORMATS, read_image, write_images
+from .film import ALL_FORMATS, read_image, relmse, write_images
 from .scene import SceneError
 
 STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP")
@@ -148,24 +149,18 @@ class StopSignals:
         else:
             raise Interrupted(signum)
 
-    class _Deferred:
-        def __init__(self, owner, raise_after):
-            self.owner = owner
-            self.raise_after = raise_after
-
-        def __enter__(self):
-            self.owner.defer += 1
-
-        def __exit__(self, exc_type, *rest):
-            self.owner.defer -= 1
-            pending = self.owner.pending
-            if pending and self.raise_after and exc_type is None and not self.owner.defer:
-                self.owner.pending = None
-                raise Interrupted(pending)
-            return False
-
+    @contextlib.contextmanager
     def deferred(self, raise_after=True):
-        return self._Deferred(self, raise_after)
+        """A block no stop signal interrupts; one that arrived meanwhile is raised after
+        it (if ``raise_after`` and the block succeeded), or left to the caller."""
+        self.defer += 1
+        try:
+            yield
+        finally:
+            self.defer -= 1
+        if self.pending and raise_after and not self.defer:
+            pending, self.pending = self.pending, None
+            raise Interrupted(pending)
 
 
 # ---------------------------------------------------------------------------------------
@@ -396,7 +391,6 @@ def _render(args, signals):
             next_write[0] = elapsed * 2   # refresh at growing intervals
 
     if reference is not None:
-        from .film import relmse
         progress.write(f"{'elapsed':>12} {'spp':>12}  relMSE")
     result = render(scene, backend, spp=spp, time_limit=args.time, seed=args.seed,
                     max_bounces=args.max_bounces, on_pass=on_pass,

@@ -56,18 +56,18 @@ def read_image(path, where=None, scene_file=None):
     return img.astype(np.float64), is_float
 
 
-_SRGB_LUT = {}
+_LUTS = {}
 
 
 def _lut(dtype, srgb):
     """The float32 value of every code of an 8- or 16-bit integer type (sRGB-decoded or
     linear): such textures decode by table lookup, with no float64 copy of the image."""
     key = (np.dtype(dtype), srgb)
-    if key not in _SRGB_LUT:
+    if key not in _LUTS:
         top = np.iinfo(dtype).max
         values = np.arange(top + 1) / top
-        _SRGB_LUT[key] = (srgb_to_linear(values) if srgb else values).astype(np.float32)
-    return _SRGB_LUT[key]
+        _LUTS[key] = (srgb_to_linear(values) if srgb else values).astype(np.float32)
+    return _LUTS[key]
 
 
 def load_texture(spec, scene_file=None, allow_negative=False):
