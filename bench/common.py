@@ -132,14 +132,14 @@ def usable_mitsuba(variant):
     return _MITSUBA_STATUS[variant]
 
 
-def mitsuba_cornell(width, height, spp, max_depth=8):
+def mitsuba_cornell(width, height, spp, max_depth=8, sampler="independent"):
     """Mitsuba 3's own Cornell box (the reference's scene) with a box pixel filter."""
     import mitsuba as mi
     d = mi.cornell_box()
     d["sensor"]["film"]["width"] = width
     d["sensor"]["film"]["height"] = height
     d["sensor"]["film"]["rfilter"] = {"type": "box"}
-    d["sensor"]["sampler"] = {"type": "independent", "sample_count": spp}
+    d["sensor"]["sampler"] = {"type": sampler, "sample_count": spp}
     d["integrator"] = {"type": "path", "max_depth": max_depth}
     return mi.load_dict(d)
 

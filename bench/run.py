@@ -35,7 +35,10 @@ from bench.scenes import (CONVERGENCE, convergence_desc, load_reference,
 FIELDS = ["section", "scene", "renderer", "parameter", "value", "metric", "result", "unit",
           "command", "machine", "date", "versions"]
 THRESHOLDS = (1e-2, 1e-3)
-SECTIONS = ("convergence", "throughput", "filtering", "blocks", "bvh", "scaling", "compile")
+SECTIONS = ("convergence", "samplers", "throughput", "filtering", "blocks", "bvh", "scaling",
+            "compile")
+OUR_SAMPLERS = ("sobol", "independent")
+MITSUBA_SAMPLERS = ("independent", "multijitter", "ldsampler")
 
 
 class Results:
@@ -195,6 +198,70 @@ def curves_from_csv(paths):
 
 # ---------------------------------------------------------------------------------------
 # Throughput, texture filtering, block sizes, compile times
+
+def _mitsuba_scene(name, sampler):
+    """Mitsuba's scene of a convergence scene with its sampler of type ``sampler``, and its
+    reference; None when Mitsuba cannot render it."""
+    import mitsuba as mi
+
+    from bench.common import mitsuba_cornell
+    from pathtracer.mitsuba import NotExpressible, mitsuba_dict
+    try:
+        ref, _ = load_reference(name, mitsuba=True)
+        scene = (mitsuba_cornell(ref.shape[1], ref.shape[0], 1, sampler=sampler)
+                 if name == "cornell-box" else
+                 mi.load_dict(mitsuba_dict(convergence_desc(name), sampler=sampler)))
+    except (FileNotFoundError, NotExpressible) as e:
+        print(f"bench: no Mitsuba samplers for {name}: {e}", file=sys.stderr)
+        return None
+    return scene, ref
+
+
+def section_samplers(scenes, backend_name, mitsuba_variant, spps, seeds, r):
+    """relMSE at equal spp, the mean of ``seeds`` renders, of each of our samplers and of
+    Mitsuba's independent and low-discrepancy samplers, each renderer against its own
+    reference (the Cornell box: Mitsuba's, for both). {(scene, spp): {renderer: relMSE}}."""
+    from pathtracer.backends import make_backend
+    from pathtracer.render import render
+    from pathtracer.scene import compile_scene
+    out = {}
+    for name in scenes:
+        try:
+            ref, _ = load_reference(name)
+        except FileNotFoundError:
+            continue
+        for sampler in OUR_SAMPLERS:
+            desc = convergence_desc(name)
+            desc.render.sampler = sampler
+            scene = compile_scene(desc)
+            backend = make_backend(backend_name, scene)
+            backend.compile()
+            for spp in spps:
+                err = float(np.mean([relmse(render(scene, backend, spp=spp, seed=s)
+                                            .film.image(), ref) for s in range(seeds)]))
+                out.setdefault((name, spp), {})[f"pt-render {backend_name} {sampler}"] = err
+        if mitsuba_variant:
+            import drjit as dr
+            import mitsuba as mi
+            mi.set_variant(mitsuba_variant)
+            for sampler in MITSUBA_SAMPLERS:
+                got = _mitsuba_scene(name, sampler)
+                if got is None:
+                    break
+                scene, mref = got
+                for spp in spps:
+                    errs = []
+                    for s in range(seeds):
+                        img = mi.render(scene, spp=spp, seed=1000 + s)
+                        dr.eval(img)
+                        errs.append(relmse(np.array(img), mref))
+                    out.setdefault((name, spp), {})[
+                        f"Mitsuba {mitsuba_variant} {sampler}"] = float(np.mean(errs))
+    for (name, spp), errs in out.items():
+        for renderer, err in errs.items():
+            r.add("samplers", name, renderer, "relMSE", err, "", "spp", spp)
+    return out
+
 
 def section_throughput(backends, res, spp, repeats, r):
     from bench.throughput import ours
@@ -424,6 +491,23 @@ def summary(r, res, args):
                          f"{spp} | {sec:.3g} | {err:.3g} | "
                          f"{'' if nz is None else f'{nz:.2g}'} |")
         lines += ["", "![convergence](convergence.png)"]
+    if res["samplers"]:
+        names = sorted({k for errs in res["samplers"].values() for k in errs},
+                       key=lambda k: (not k.startswith("pt-render"), k))
+        lines += ["", "## Samplers: relMSE at equal spp", "",
+                  "Mean of several seeds; each renderer against its own reference (the Cornell "
+                  "box: Mitsuba's). In brackets: the ratio to the same renderer's independent "
+                  "sampler.", "",
+                  "| scene | spp | " + " | ".join(names) + " |",
+                  "|---|---|" + "---|" * len(names)]
+        for (scene, spp), errs in res["samplers"].items():
+            cells = []
+            for k in names:
+                base = errs.get(k.rsplit(" ", 1)[0] + " independent")
+                e = errs.get(k)
+                cells.append("" if e is None else f"{e:.3g}" +
+                             (f" ({e / base:.2f})" if base else ""))
+            lines.append(f"| {scene} | {spp} | " + " | ".join(cells) + " |")
     thr = res["throughput"]
     if thr:
         lines += ["", "## Throughput (Cornell box)", "",
@@ -560,10 +644,14 @@ def main(argv=None):
         max_spp, tp, repeats, filt_res, mres = 1024, ((256, 256), 16), 7, (320, 240), ((96, 96), 4)
     t0 = time.perf_counter()
     want = set(args.sections)
-    res = {"convergence": ({}, {}), "throughput": {}, "filtering": {}, "blocks": {}, "bvh": [],
+    res = {"convergence": ({}, {}), "samplers": {}, "throughput": {}, "filtering": {}, "blocks": {}, "bvh": [],
            "scaling": [], "compile": {}}
     if "convergence" in want:
         res["convergence"] = section_convergence(args.scenes, [b], peer, max_spp, r)
+    if "samplers" in want:
+        spps = (2,) if args.tiny else (64,) if args.quick or not args.gpu else (64, 1024)
+        res["samplers"] = section_samplers(args.scenes, b, peer, spps,
+                                           1 if args.tiny else 3 if args.quick else 4, r)
     if "throughput" in want:
         res["throughput"] = section_throughput([b], tp[0], tp[1], repeats, r)
     if "filtering" in want:

@@ -20,6 +20,7 @@ from .errors import (EXIT_INPUT, EXIT_INTERNAL, EXIT_IO, EXIT_OK, InputError, In
                      OutputError)
 from .film import ALL_FORMATS, read_image, relmse, write_images
 from .scene import SceneError
+from .scene.loader import SAMPLERS
 
 STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP")
                      if hasattr(signal, n))
@@ -101,6 +102,9 @@ def build_parser():
                    help="override the camera resolution")
     p.add_argument("--max-bounces", type=_integer(0, limits.MAX_BOUNCES),
                    help="override render.maxBounces")
+    p.add_argument("--sampler", choices=SAMPLERS,
+                   help="sobol (Owen-scrambled, low discrepancy) or independent; "
+                        "default: the scene's render.sampler (sobol)")
     p.add_argument("--reference", metavar="IMAGE",
                    help="reference image (.npy, .hdr, .exr): print elapsed s, spp and relMSE "
                         "after each pass and write them as CSV (see --reference-csv)")
@@ -329,6 +333,8 @@ def _render(args, signals):
         print(f"pt-render: warning: {w}", file=log)
     if args.resolution:
         desc.camera.resolution = args.resolution
+    if args.sampler:
+        desc.render.sampler = args.sampler
     check_film(*desc.camera.resolution, args.backend)
     scene = compile_scene(desc)
     load_seconds = time.perf_counter() - t0

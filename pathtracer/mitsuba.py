@@ -44,8 +44,9 @@ def _material(m):
     return bsdf if d.get("transmission", 0) > 0 else {"type": "twosided", "bsdf": bsdf}
 
 
-def mitsuba_dict(desc, spp=1):
-    """The Mitsuba scene dictionary of a SceneDescription (raises NotExpressible)."""
+def mitsuba_dict(desc, spp=1, sampler="independent"):
+    """The Mitsuba scene dictionary of a SceneDescription (raises NotExpressible); ``sampler``
+    is the type of Mitsuba's sampler (independent, stratified, multijitter, ldsampler, ...)."""
     import mitsuba as mi
     T = mi.ScalarTransform4f
     cam = desc.camera
@@ -62,7 +63,7 @@ def mitsuba_dict(desc, spp=1):
                                             target=list(cam.look_at), up=list(cam.up)),
                     "film": {"type": "hdrfilm", "width": w, "height": h,
                              "rfilter": {"type": "box"}, "pixel_format": "rgb"},
-                    "sampler": {"type": "independent", "sample_count": spp}}}
+                    "sampler": {"type": sampler, "sample_count": spp}}}
     for name, m in desc.materials.items():
         d["mat-" + name] = _material(m)
     for i, o in enumerate(desc.objects):

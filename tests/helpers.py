@@ -7,7 +7,7 @@ import numpy as np
 
 from pathtracer.backends import make_backend
 from pathtracer.kernels.layout import P_FIELDS
-from pathtracer.kernels.rng import path_key, sample_1d
+from pathtracer.kernels.rng import path_key, sample_1d, sample_sobol
 from pathtracer.render import render
 from pathtracer.scene.geometry import uv_sphere
 
@@ -129,3 +129,13 @@ GOLDEN = [(0, 0, 0, 0), (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (0, 0, 0, 1),
 def golden_python_values():
     """The GOLDEN stream values computed by the interpreted kernel code."""
     return [float(sample_1d(path_key(p, s, seed), d)) for p, s, d, seed in GOLDEN]
+
+
+# (pixel key, sample, dimension) of the sobol sampler's golden values
+GOLDEN_SOBOL = [(0, 0, 0), (0, 1, 0), (0, 1, 1), (0, 2, 2), (0, 3, 3), (12345, 0, 4),
+                (12345, 7, 5), (2**32 - 1, 1000, 31), (987654321, 2**31 - 1, 4001)]
+
+
+def golden_sobol_python_values():
+    """The GOLDEN_SOBOL values computed by the interpreted kernel code."""
+    return [float(sample_sobol(np.uint64(k), i, d)) for k, i, d in GOLDEN_SOBOL]

@@ -128,3 +128,19 @@ def test_thesis_folder_missing_files_and_allow_missing(tmp_path):
                   "--resolution", "32x18", "--spp", "1", "--backend", "cpu")
     assert r.returncode == 0, r.stderr
     assert "warning" in r.stderr and (tmp_path / "c.png").exists()
+
+
+def test_sampler_option(tmp_path, small_scene):
+    """--sampler overrides render.sampler: both render, differently, and agree in the mean;
+    a bad name is a one-line error."""
+    imgs = {}
+    for sampler in ("sobol", "independent"):
+        out = tmp_path / f"{sampler}.npy"
+        r = pt_render(small_scene, "-o", out, "--spp", 16, "--sampler", sampler, "--quiet")
+        assert r.returncode == 0, r.stderr
+        assert ("sobol" in r.stderr.split("features")[1]) == (sampler == "sobol")
+        imgs[sampler] = np.load(out)
+    assert not np.array_equal(imgs["sobol"], imgs["independent"])
+    assert abs(imgs["sobol"].mean() - imgs["independent"].mean()) < 0.02
+    r = pt_render(small_scene, "--sampler", "halton")
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1

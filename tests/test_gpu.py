@@ -1,9 +1,10 @@
 """Checks that need a real CUDA GPU (skipped elsewhere; run on the device machine)."""
 import numpy as np
 
-from pathtracer.kernels.rng import path_key, sample_1d
+from pathtracer.kernels.rng import path_key, sample_1d, sample_sobol
 from tests.conftest import gpu
-from tests.helpers import GOLDEN, golden_python_values as _python_values
+from tests.helpers import (GOLDEN, GOLDEN_SOBOL, golden_python_values as _python_values,
+                           golden_sobol_python_values)
 
 
 @gpu
@@ -20,6 +21,22 @@ def test_rng_identical_on_gpu():
     out = np.zeros(len(args), np.float32)
     k[1, 32](args, out)
     assert np.array_equal(out, np.array(_python_values(), np.float32))
+
+
+@gpu
+def test_sobol_identical_on_gpu():
+    from numba import cuda
+
+    @cuda.jit
+    def k(args, out):
+        i = cuda.grid(1)
+        if i < args.shape[0]:
+            out[i] = sample_sobol(np.uint64(args[i, 0]), args[i, 1], args[i, 2])
+
+    args = np.array(GOLDEN_SOBOL, np.int64)
+    out = np.zeros(len(args), np.float32)
+    k[1, 32](args, out)
+    assert np.array_equal(out, np.array(golden_sobol_python_values(), np.float32))
 
 
 @gpu

@@ -185,3 +185,14 @@ def test_cornell_scene_matches_reference_description():
     assert d.camera.resolution == (256, 256) and d.render.max_bounces == 7
     s = load_scene(CORNELL)
     assert s.n_triangles == 36 and s.features.tri_lights and not s.features.point_lights
+
+
+def test_sampler_key(tmp_path):
+    """render.sampler: sobol by default (the scene format), independent on request; the
+    kernel is specialised on it."""
+    path = write_scene(tmp_path, minimal())
+    assert load_scene(path).features.sobol
+    path = write_scene(tmp_path, minimal(render={"sampler": "independent"}))
+    assert not load_scene(path).features.sobol
+    msg, _ = error_of(tmp_path, minimal(render={"sampler": "halton"}))
+    assert "/render/sampler" in msg and "'sobol'" in msg

@@ -3,10 +3,13 @@ against Mitsuba's `dielectric`, and a diffuse sphere, all lit by the studio HDRI
 also checks the environment mapping: the background is the map seen directly).
 
 References: tests/references/*.npy, rendered by `python -m tests.mitsuba_refs` (settings in
-references.json). Our image is averaged over K independent seeds; per pixel and for the
-image mean, the difference to the reference is judged against the spread of those seeds
-(plus the reference's own noise), on a tone-mapped scale x / (1 + x) so that the few
-pixels that see a small bright lamp through a sharp lobe do not decide the verdict alone.
+references.json). Our image (the default sampler, sobol) is averaged over K independent
+seeds; per pixel and for the image mean, the difference to the reference is judged against
+the spread of those seeds plus the reference's own noise, on a tone-mapped scale x / (1 + x)
+so that the few pixels that see a small bright lamp through a sharp lobe do not decide the
+verdict alone. The reference's noise is that of Mitsuba's independent sampler at its spp:
+estimated from K renders of ours with the independent sampler (the same estimator), scaled by
+their spp over the reference's (sobol's own spread would understate it).
 """
 import json
 import os
@@ -28,29 +31,37 @@ def tone(x):
     return x / (1.0 + x)
 
 
+def _renders(tmp_path, case, backend, spp, sampler):
+    env = env_for(case, SHARED)
+    imgs = []
+    for seed in range(K):
+        path = tmp_path / f"s{seed}-{sampler}.json"
+        desc = our_scene(CASES[case], env, spp=spp, seed=seed)
+        desc["render"]["sampler"] = sampler
+        path.write_text(json.dumps(desc))
+        scene = load_scene(str(path))
+        result = render(scene, make_backend(backend, scene), spp=spp)
+        assert result.film.nonfinite == 0
+        imgs.append(result.film.image().astype(np.float64))
+    return np.array(imgs)
+
+
 @needs_shared
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("case", list(CASES))
 def test_agrees_with_mitsuba(tmp_path, case, backend):
     spp = 64 if backend == "cpu" else 1024
     ref = np.load(os.path.join(REF_DIR, case + ".npy")).astype(np.float64)
-    env = env_for(case, SHARED)
-    imgs = []
-    for seed in range(K):
-        path = tmp_path / f"s{seed}.json"
-        path.write_text(json.dumps(our_scene(CASES[case], env, spp=spp, seed=seed)))
-        scene = load_scene(str(path))
-        result = render(scene, make_backend(backend, scene), spp=spp)
-        assert result.film.nonfinite == 0
-        imgs.append(result.film.image().astype(np.float64))
-    imgs = np.array(imgs)
+    imgs = _renders(tmp_path, case, backend, spp, "sobol")
     mean = imgs.mean(0)
-    # the reference's noise relative to ours: it has ref_spp samples, we K * spp
-    ref_share = (K * spp) / META["spp"]
+    # the reference's noise: independent sampling at ref_spp samples per pixel
+    ind_spp = spp // 4
+    ind = _renders(tmp_path, case, backend, ind_spp, "independent")
+    ref_scale = ind_spp / META["spp"]
 
     # 1. image mean per channel: within 4 standard errors (seed spread, both renderers)
     m = imgs.mean(axis=(1, 2))                    # (K, 3)
-    se = m.std(0, ddof=1) / np.sqrt(K) * np.sqrt(1 + ref_share)
+    se = np.sqrt(m.var(0, ddof=1) / K + ind.mean(axis=(1, 2)).var(0, ddof=1) * ref_scale)
     diff = mean.mean((0, 1)) - ref.mean((0, 1))
     assert np.all(np.abs(diff) <= 4 * se + 2e-3 * ref.mean((0, 1))), (diff, se)
 
@@ -59,7 +70,7 @@ def test_agrees_with_mitsuba(tmp_path, case, backend):
     # degrees of freedom it is about 0.5 when both renderers agree. The pooled ratio
     # (sum of squared differences over sum of variances) is about 1.
     t = tone(imgs)
-    t_se2 = t.var(0, ddof=1) / K * (1 + ref_share) + 1e-10
+    t_se2 = t.var(0, ddof=1) / K + tone(ind).var(0, ddof=1) * ref_scale + 1e-10
     d2 = (t.mean(0) - tone(ref)) ** 2
     z2 = d2 / t_se2
     print(f"{case}: median z^2 {np.median(z2):.3f}, pooled {d2.sum() / t_se2.sum():.3f}")

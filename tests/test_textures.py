@@ -11,7 +11,7 @@ import pytest
 
 from pathtracer.kernels.camera import thin_lens_ray
 from pathtracer.kernels.textures import tex_lookup
-from pathtracer.scene import load_scene
+from pathtracer.scene import load_scene, load_scene_description
 from pathtracer.scene.geometry import vertex_tangents
 from pathtracer.scene.errors import SceneError
 from pathtracer.scene.images import srgb_to_linear
@@ -228,3 +228,14 @@ def test_textured_emission_equals_constant_emission(tmp_path):
     ib = run(b, "cpu", spp=16).film.image()
     assert ia.mean() > 0.01
     assert np.allclose(ia, ib, rtol=1e-4, atol=1e-6)
+
+
+def test_trilinear_filter_is_accepted_and_filtered_bilinearly(tmp_path):
+    """"trilinear" is a filter of the scene format; until mip-maps exist it is read as
+    bilinear, with a warning that says so."""
+    iio.imwrite(tmp_path / "t.png", np.full((2, 2, 3), 128, np.uint8))
+    scene = _quad_scene(tmp_path, {"type": "diffuse",
+                                   "albedo": {"texture": "t.png", "filter": "trilinear"}})
+    with pytest.warns(UserWarning, match="trilinear.*bilinear"):
+        desc = load_scene_description(write_scene(tmp_path, scene))
+    assert desc.materials["m"].textures["albedo"].filter == "bilinear"

@@ -26,14 +26,14 @@ import numpy as np
 
 from .camera import pinhole_ray, thin_lens_ray
 from .constants import INF, ONE, RR_MAX, ZERO
-from .device import device, entry_marker, step_marker
+from .device import entry_marker, step_marker
 from .emitters import make_emitters
 from .layout import (D_BSDF_LOBE, D_BSDF_U, D_BSDF_V, D_FIRST_BOUNCE, D_LENS_U, D_LENS_V,
                      D_LIGHT_SELECT, D_LIGHT_U, D_LIGHT_V, D_PIXEL_X, D_PIXEL_Y, D_RR,
                      DIMS_PER_BOUNCE, P_TRANSMISSION, STAT_BOUNCE_RAYS, STAT_NONFINITE,
                      STAT_SHADOW_RAYS, TRI_E1, TRI_E2, TRI_V0, Features, SceneArrays,
                      specialise)
-from .rng import path_key, sample_1d
+from .rng import make_sampler
 from .scatter import make_scatter
 from .surface import make_surface
 from .traverse import any_hit, closest_hit
@@ -41,21 +41,6 @@ from .vec import add, cross, dot, load3, madd, max_comp, mul, neg, normalize, sc
 from .warps import power_heuristic
 
 __all__ = ["Features", "SceneArrays", "make_render_pixel"]
-
-
-@device
-def russian_roulette(beta, bounce, rr_depth, key, dim):
-    """(beta, alive): after rr_depth bounces a path continues with probability
-    q = min(max beta, RR_MAX) and survivors are reweighted by 1/q (unbiased)."""
-    beta_max = max_comp(beta)
-    if beta_max <= ZERO:
-        return beta, False
-    if bounce >= rr_depth:
-        q = min(beta_max, RR_MAX)
-        if sample_1d(key, dim + D_RR) >= q:
-            return beta, False
-        beta = scale(beta, ONE / q)
-    return beta, True
 
 
 @functools.lru_cache(maxsize=None)
@@ -68,6 +53,7 @@ def make_render_pixel(features, target="cpu"):
     TRI_LIGHTS = S.tri_lights
     ANY_ENVIRONMENT = S.any_environment
     NEE = S.nee
+    start_path, open_set, draw = make_sampler(S.sobol)
     surface = make_surface(features, target)
     scatter = make_scatter(features, target)
     emitters = make_emitters(features, target)
@@ -80,15 +66,31 @@ def make_render_pixel(features, target="cpu"):
         emitters.escaped)
 
     @step
-    def camera_ray(cam, px, py, key, width, height):
+    def camera_ray(cam, px, py, state, width, height):
         """A uniform position in pixel (px, py) and, for the thin lens, on the lens."""
+        dims = open_set(state, D_PIXEL_X)
         if THIN_LENS:
-            return thin_lens_ray(cam, np.float32(px), np.float32(py), sample_1d(key, D_PIXEL_X),
-                                 sample_1d(key, D_PIXEL_Y), sample_1d(key, D_LENS_U),
-                                 sample_1d(key, D_LENS_V), np.float32(width),
-                                 np.float32(height))
-        return pinhole_ray(cam, np.float32(px), np.float32(py), sample_1d(key, D_PIXEL_X),
-                           sample_1d(key, D_PIXEL_Y), np.float32(width), np.float32(height))
+            return thin_lens_ray(cam, np.float32(px), np.float32(py),
+                                 draw(state, dims, D_PIXEL_X), draw(state, dims, D_PIXEL_Y),
+                                 draw(state, dims, D_LENS_U), draw(state, dims, D_LENS_V),
+                                 np.float32(width), np.float32(height))
+        return pinhole_ray(cam, np.float32(px), np.float32(py), draw(state, dims, D_PIXEL_X),
+                           draw(state, dims, D_PIXEL_Y), np.float32(width),
+                           np.float32(height))
+
+    @step
+    def russian_roulette(beta, bounce, rr_depth, state, dim):
+        """(beta, alive): after rr_depth bounces a path continues with probability
+        q = min(max beta, RR_MAX) and survivors are reweighted by 1/q (unbiased)."""
+        beta_max = max_comp(beta)
+        if beta_max <= ZERO:
+            return beta, False
+        if bounce >= rr_depth:
+            q = min(beta_max, RR_MAX)
+            if draw(state, open_set(state, dim + D_RR), dim + D_RR) >= q:
+                return beta, False
+            beta = scale(beta, ONE / q)
+        return beta, True
 
     @step
     def direct_light(beta, is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, p,
@@ -115,8 +117,8 @@ def make_render_pixel(features, target="cpu"):
                       scene, stack):
         """Radiance (r, g, b) of one camera path through pixel (px, py), with the number of
         bounce rays and shadow rays it traced."""
-        key = path_key(py * width + px, sample_index, seed)
-        o, d = camera_ray(scene.cam, px, py, key, width, height)
+        state = start_path(py * width + px, sample_index, seed)
+        o, d = camera_ray(scene.cam, px, py, state, width, height)
         beta = (ONE, ONE, ONE)      # path throughput: product of f cos / pdf (and 1/q of RR)
         radiance = (ZERO, ZERO, ZERO)
         pdf_prev = ZERO             # solid-angle pdf of the BSDF sample that made this ray;
@@ -161,9 +163,10 @@ def make_render_pixel(features, target="cpu"):
             dim = D_FIRST_BOUNCE + bounce * DIMS_PER_BOUNCE
             # ---- next-event estimation: one emitter sample, one shadow ray ----
             if NEE:
+                dims = open_set(state, dim + D_LIGHT_U)
                 wi, t_max, le, pdf_light, is_delta, light_tri = sample_emitter(
-                    scene, p, sample_1d(key, dim + D_LIGHT_SELECT),
-                    sample_1d(key, dim + D_LIGHT_U), sample_1d(key, dim + D_LIGHT_V))
+                    scene, p, draw(state, dims, dim + D_LIGHT_SELECT),
+                    draw(state, dims, dim + D_LIGHT_U), draw(state, dims, dim + D_LIGHT_V))
                 if pdf_light > ZERO:
                     contribution, traced = direct_light(
                         beta, is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, p,
@@ -173,10 +176,11 @@ def make_render_pixel(features, target="cpu"):
                     radiance = add(radiance, contribution)
                     n_shadow_rays += traced
             # ---- BSDF sampling: the next ray ----
+            dims = open_set(state, dim + D_BSDF_U)
             wi, weight, pdf_bsdf = sample_world(
                 is_principled, params, wo, wo_l, tangent, bitangent, ns, ng,
-                sample_1d(key, dim + D_BSDF_LOBE), sample_1d(key, dim + D_BSDF_U),
-                sample_1d(key, dim + D_BSDF_V))
+                draw(state, dims, dim + D_BSDF_LOBE), draw(state, dims, dim + D_BSDF_U),
+                draw(state, dims, dim + D_BSDF_V))
             if not (pdf_bsdf > ZERO):
                 break
             beta = mul(beta, weight)
@@ -186,7 +190,7 @@ def make_render_pixel(features, target="cpu"):
             skip = tri
             bounce += 1
             n_bounce_rays += 1
-            beta, alive = russian_roulette(beta, bounce, rr_depth, key, dim)
+            beta, alive = russian_roulette(beta, bounce, rr_depth, state, dim)
             if not alive:
                 break
         return radiance[0], radiance[1], radiance[2], n_bounce_rays, n_shadow_rays

@@ -215,18 +215,21 @@ STAT_NONFINITE = 2
 STATS_WIDTH = 3
 
 # ---- Random dimensions of a path (kernels.rng) -------------------------------------------------
+# In sets of four (the sobol sampler draws each set from one 4-D Sobol sequence, the first
+# two dimensions of a set best stratified): set 0 the camera, then per scattering event a
+# light set and a BSDF set.
 D_PIXEL_X = 0
 D_PIXEL_Y = 1
 D_LENS_U = 2
 D_LENS_V = 3
 D_FIRST_BOUNCE = 4    # then DIMS_PER_BOUNCE per scattering event:
-D_LIGHT_SELECT = 0
-D_LIGHT_U = 1
-D_LIGHT_V = 2
-D_BSDF_U = 3
-D_BSDF_V = 4
-D_RR = 5
-D_BSDF_LOBE = 6
+D_LIGHT_U = 0         # light set: position on the light (or environment direction)
+D_LIGHT_V = 1
+D_LIGHT_SELECT = 2    # which light; dimension 3 of the set is unused
+D_BSDF_U = 4          # BSDF set: direction
+D_BSDF_V = 5
+D_BSDF_LOBE = 6       # which lobe
+D_RR = 7              # Russian roulette
 DIMS_PER_BOUNCE = 8
 
 
@@ -242,6 +245,7 @@ class Features(NamedTuple):
     tangents: bool = False     # per-vertex tangents from texture coordinates
     env_map: bool = False      # an HDRI environment (importance sampled)
     thin_lens: bool = False    # aperture > 0
+    sobol: bool = False        # Owen-scrambled Sobol sampler (else independent)
 
 
 class Specialisation(NamedTuple):
@@ -262,6 +266,7 @@ class Specialisation(NamedTuple):
     thin_lens: bool
     fold: bool             # shading normals differ from geometric ones: fold lobes back
     lean: bool             # Lambertian and flat shading only: the cheapest path
+    sobol: bool            # the Owen-scrambled Sobol sampler
 
 
 def specialise(features):
@@ -276,7 +281,7 @@ def specialise(features):
         any_environment=f.environment or f.env_map, nee=any_lights or f.env_map,
         smooth=f.smooth, principled=f.principled, textures=f.textures,
         normal_map=normal_map, tangents=f.tangents, thin_lens=f.thin_lens, fold=fold,
-        lean=not f.principled and not fold)
+        lean=not f.principled and not fold, sobol=f.sobol)
 
 
 class SceneArrays(NamedTuple):

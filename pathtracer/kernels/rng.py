@@ -9,8 +9,16 @@ Functions for GPU Rendering", JCGT 9(3)). Arithmetic is on uint64 holding 32-bit
 masked after every step: compiled code and interpreted NumPy then agree bit for bit, and no
 int64 operand sneaks in (int64 op uint64 is typed float64 by Numba).
 
-Dimension layout of one path (as pbrt's IndependentSampler): 0-1 pixel position, 2-3 lens,
-then DIMS_PER_BOUNCE consecutive dimensions per scattering event (see integrator).
+Two samplers draw from these hashes (``make_sampler``): ``independent`` (one hash per
+dimension, as pbrt's IndependentSampler) and ``sobol``, the default: Owen-scrambled Sobol
+points (Burley 2020, "Practical Hash-based Owen Scrambling", JCGT 9(4)), low discrepancy per
+pixel, decorrelated between pixels by per-pixel scrambling seeds.
+
+Dimension layout of one path (``kernels.layout``, D_*): dimensions come in sets of four, and
+the sobol sampler draws each set from the 4-D Sobol sequence with its own index shuffle
+(Burley's padding): set 0 is the camera (pixel x, pixel y, lens u, lens v); every
+scattering event then has two sets, the light sample (position u, v, light pick) and the BSDF
+sample (direction u, v, lobe pick, Russian roulette).
 """
 import numpy as np
 
@@ -37,10 +45,15 @@ def pcg_hash(x):
 
 
 @device
+def pixel_key(pixel, seed):
+    """Key of one pixel's samples; pixel and seed are non-negative integers < 2**32."""
+    return pcg_hash((pcg_hash(np.uint64(seed) & M32) + np.uint64(pixel)) & M32)
+
+
+@device
 def path_key(pixel, sample, seed):
     """Key of one camera path; pixel, sample and seed are non-negative integers < 2**32."""
-    h = pcg_hash((pcg_hash(np.uint64(seed) & M32) + np.uint64(pixel)) & M32)
-    return pcg_hash((h + np.uint64(sample)) & M32)
+    return pcg_hash((pixel_key(pixel, seed) + np.uint64(sample)) & M32)
 
 
 @device
@@ -48,3 +61,172 @@ def sample_1d(key, dim):
     """Uniform float32 in [0, 1) for dimension ``dim`` of the path with ``key``."""
     h = pcg_hash((key + np.uint64(dim) * _GOLDEN) & M32)
     return np.float32(h >> _S8) * _TO_UNIT
+
+
+# ---------------------------------------------------------------------------------------
+# Owen-scrambled Sobol (Burley 2020)
+
+SOBOL_DIMS = 4          # dimensions per set (the Sobol sequence's first four)
+SOBOL_BITS = 32
+_K1 = np.uint64(1)
+
+
+def sobol_matrices():
+    """Generator matrices (as direction numbers, uint64 holding 32 bits; row d, column k:
+    the contribution of index bit k) of the first four Sobol dimensions, from Joe & Kuo's
+    primitive polynomials and initial numbers (new-joe-kuo-6.21201): dimension 0 is van der
+    Corput; then (s, a, m) = (1, 0, [1]), (2, 1, [1, 3]), (3, 1, [1, 3, 1])."""
+    params = [(1, 0, [1]), (2, 1, [1, 3]), (3, 1, [1, 3, 1])]
+    v = np.zeros((SOBOL_DIMS, SOBOL_BITS), np.uint64)
+    v[0] = [1 << (31 - k) for k in range(SOBOL_BITS)]
+    for d, (s, a, m) in enumerate(params, start=1):
+        w = [0] * SOBOL_BITS
+        for k in range(s):
+            w[k] = m[k] << (31 - k)
+        for k in range(s, SOBOL_BITS):
+            w[k] = w[k - s] ^ (w[k - s] >> s)
+            for j in range(1, s):
+                if (a >> (s - 1 - j)) & 1:
+                    w[k] ^= w[k - j]
+        v[d] = w
+    return v
+
+
+SOBOL_MATRIX = sobol_matrices()
+_B1 = np.uint64(1)
+_B2 = np.uint64(2)
+_B16 = np.uint64(16)
+_MASK1 = np.uint64(0x55555555)
+_MASK2 = np.uint64(0x33333333)
+_MASK4 = np.uint64(0x0F0F0F0F)
+_MASK8 = np.uint64(0x00FF00FF)
+_TOP = np.uint64(0x80000000)
+# the scramble's multipliers: Vegdahl's improvement of Burley's Laine-Karras hash
+# ("Building a better LK hash", 2021; as Cycles uses)
+_LK0 = np.uint64(0x3d20adea)
+_LK1 = np.uint64(0x05526c56)
+_LK2 = np.uint64(0x53a22864)
+_SET_MUL = np.uint64(0x85EBCA6B)   # odd constants spreading set and dimension numbers
+_DIM_MUL = np.uint64(0xC2B2AE35)
+
+
+@device
+def reverse_bits(x):
+    """The 32 bits of x (a uint64 below 2**32) in reverse order."""
+    x = ((x >> _B1) & _MASK1) | ((x & _MASK1) << _B1)
+    x = ((x >> _B2) & _MASK2) | ((x & _MASK2) << _B2)
+    x = ((x >> _S4) & _MASK4) | ((x & _MASK4) << _S4)
+    x = ((x >> _S8) & _MASK8) | ((x & _MASK8) << _S8)
+    return ((x >> _B16) | (x << _B16)) & M32
+
+
+SOBOL_MATRIX_REVERSED = np.array([[int(f"{int(v):032b}"[::-1], 2) for v in row]
+                                  for row in SOBOL_MATRIX], np.uint64)
+
+
+@device
+def lk_permutation(x, seed):
+    """The Owen scramble in bit-reversed order (x and the result reversed): every step
+    changes a bit only as a function of the bits below it (x * even, + seed, * odd), i.e. of
+    the more significant bits of the unreversed number (Burley 2020, listing 3, with
+    Vegdahl's constants). Products of numbers below 2**32 fit in the uint64."""
+    x ^= (x * _LK0) & M32
+    x = (x + seed) & M32
+    x = (x * ((seed >> _B16) | _K1)) & M32
+    x ^= (x * _LK1) & M32
+    x ^= (x * _LK2) & M32
+    return x
+
+
+@device
+def owen_scramble(x, seed):
+    """Nested uniform (Owen) scramble of the 32-bit fraction x (Burley 2020, listing 4)."""
+    return reverse_bits(lk_permutation(reverse_bits(x), seed))
+
+
+@device
+def sobol_set(pix, index_reversed, dset):
+    """The Sobol coordinates (dimensions 0-3, each a 32-bit fraction in reversed bit order)
+    of one sample in dimension set ``dset`` of the pixel with key ``pix``, and the set's
+    seed: (x0, x1, x2, x3, seed). ``index_reversed``: the sample index, bits reversed.
+
+    Every set has its own shuffle of the sample index (Burley 2020, section 4: the index
+    itself Owen-scrambled, so that sets are mutually independent while each keeps its
+    stratification at every power of two). The shuffled index is taken XOR the shuffle of
+    index 0: a scramble maps [0, 2**k) onto itself, so this is below 2**k for every index
+    below 2**k and the Sobol loop runs over log2(spp) bits only, not 32. That changes the
+    points by a constant XOR (Sobol points are linear in the index's bits), a digital shift
+    that the output scramble (sobol_component) absorbs: the estimator is the same in
+    distribution as Burley's. All of it runs in reversed bit order (as Cycles does), which
+    saves reversing the index and the coordinates back and forth."""
+    seed = pcg_hash((pix + (np.uint64(dset) + _K1) * _SET_MUL) & M32)
+    t = lk_permutation(index_reversed, seed) ^ lk_permutation(np.uint64(0), seed)
+    x0 = np.uint64(0)
+    x1 = np.uint64(0)
+    x2 = np.uint64(0)
+    x3 = np.uint64(0)
+    k = 0
+    while t != 0:   # bit 31 - k of t is bit k of the shuffled index
+        if t & _TOP:
+            x0 ^= SOBOL_MATRIX_REVERSED[0, k]
+            x1 ^= SOBOL_MATRIX_REVERSED[1, k]
+            x2 ^= SOBOL_MATRIX_REVERSED[2, k]
+            x3 ^= SOBOL_MATRIX_REVERSED[3, k]
+        t = (t << _K1) & M32
+        k += 1
+    return x0, x1, x2, x3, seed
+
+
+@device
+def sobol_component(sobol, comp):
+    """Uniform float32 in [0, 1): coordinate ``comp`` (0-3) of a sobol_set, Owen-scrambled
+    with its own seed."""
+    seed = pcg_hash((sobol[4] + np.uint64(comp + 1) * _DIM_MUL) & M32)
+    x = reverse_bits(lk_permutation(sobol[comp], seed))
+    return np.float32(x >> _S8) * _TO_UNIT
+
+
+@device
+def sample_sobol(pix, index, dim):
+    """Dimension ``dim`` of sample ``index`` of the pixel with key ``pix`` (the sobol
+    sampler's numbers one at a time; the integrator draws a set at once)."""
+    return sobol_component(sobol_set(pix, reverse_bits(np.uint64(index) & M32), dim >> 2),
+                           dim & 3)
+
+
+def make_sampler(sobol):
+    """The functions of a sampler (closures over the choice, so the other one is not
+    compiled):
+
+    - ``start_path(pixel, sample, seed)``: the state of one camera path;
+    - ``open_set(state, dim)``: what the draws of dim's set of four share (the sobol
+      sampler's Sobol point; nothing for the independent sampler);
+    - ``draw(state, dims, dim)``: the uniform float32 of dimension ``dim`` from its opened
+      set ``dims``.
+
+    The independent sampler's numbers are ``sample_1d(path_key(pixel, sample, seed), dim)``.
+    """
+    SOBOL = bool(sobol)
+    ZERO_SET = (np.uint64(0), np.uint64(0), np.uint64(0), np.uint64(0), np.uint64(0))
+
+    @device
+    def start_path(pixel, sample, seed):
+        pix = pixel_key(pixel, seed)
+        index = np.uint64(sample) & M32
+        if SOBOL:
+            return pcg_hash((pix + index) & M32), pix, reverse_bits(index)
+        return pcg_hash((pix + index) & M32), pix, index
+
+    @device
+    def open_set(state, dim):
+        if SOBOL:
+            return sobol_set(state[1], state[2], dim >> 2)
+        return ZERO_SET
+
+    @device
+    def draw(state, dims, dim):
+        if SOBOL:
+            return sobol_component(dims, dim & 3)
+        return sample_1d(state[0], dim)
+
+    return start_path, open_set, draw

@@ -92,7 +92,8 @@ def compile_scene(desc, use_cache=True, bvh_options=None):
         tri_lights=lights.has_tri_lights, point_lights=lights.has_point_lights,
         environment=env.constant, smooth=tri.smooth, principled=tables.any_principled,
         textures=use_textures, normal_map=tables.any_normal_map and use_textures,
-        tangents=use_tangents, env_map=env.has_map, thin_lens=desc.camera.lens_radius > 0)
+        tangents=use_tangents, env_map=env.has_map, thin_lens=desc.camera.lens_radius > 0,
+        sobol=desc.render.sampler == "sobol")
     cam = camera_array(desc.camera, tri.shift)
     if not (np.isfinite(cam).all() and np.abs(cam).max() <= limits.FLOAT32_MAX):
         raise SceneError("the camera's numbers overflow float32 (position, fov, aperture or "

@@ -9,6 +9,7 @@ import json
 import math
 import os
 import re
+import warnings
 from dataclasses import dataclass, field
 from typing import Optional
 
@@ -35,12 +36,16 @@ class Camera:
     lens_radius: float = 0.0
 
 
+SAMPLERS = ("sobol", "independent")
+
+
 @dataclass
 class RenderSettings:
     spp: int = 64
     max_bounces: int = 8
     rr_depth: int = 5
     seed: int = 0
+    sampler: str = "sobol"     # or "independent"
 
 
 @dataclass
@@ -466,7 +471,8 @@ def _render(n):
         spp=n.integer("spp", 64, lo=1, hi=limits.MAX_SPP),
         max_bounces=n.integer("maxBounces", 8, lo=0, hi=limits.MAX_BOUNCES),
         rr_depth=n.integer("rrDepth", 5, lo=0, hi=limits.MAX_BOUNCES),
-        seed=n.integer("seed", 0, lo=0, hi=limits.MAX_SEED))
+        seed=n.integer("seed", 0, lo=0, hi=limits.MAX_SEED),
+        sampler=n.string("sampler", "sobol", choices=SAMPLERS))
     n.finish()
     return r
 
@@ -540,8 +546,13 @@ def _texture_spec(n, key, base, color_space):
                            color_space=t.string("colorSpace", color_space,
                                                 choices=("sRGB", "linear")),
                            filter=t.string("filter", "bilinear",
-                                           choices=("bilinear", "nearest")),
+                                           choices=("trilinear", "bilinear", "nearest")),
                            pointer=where)
+        if spec.filter == "trilinear":
+            # the scene format's default once mip-maps exist; bilinear until then
+            warnings.warn(f"{n.file}: {t.path('filter')}: trilinear filtering needs "
+                          "mip-maps, not built yet: filtered bilinearly", stacklevel=2)
+            spec.filter = "bilinear"
         spec.tile = _pair(t, "tile", (1.0, 1.0))
         spec.offset = _pair(t, "offset", (0.0, 0.0))
         if t.has("scale"):
