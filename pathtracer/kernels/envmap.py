@@ -5,17 +5,23 @@ u = 0.5 + atan2(d.x, -d.z) / (2 pi), v = acos(d.y) / pi (v = 0: top row), and th
 read bilinearly with texel centres at ((i + 0.5) / W, (j + 0.5) / H), wrapping in u and
 clamping in v.
 
-Importance sampling (Pharr, Jakob, Humphreys, PBRT 3rd ed., sec. 14.2.4): a piecewise-
-constant 2-D distribution over the W x H cells of [0,1]^2, a marginal over rows and a
-conditional per row. A cell's weight is its mean luminance under the bilinear
-reconstruction times sin(theta) of its centre. A point (u, v) drawn uniformly inside the
-chosen cell maps to a direction with solid-angle density p(u, v) / (2 pi^2 sin theta):
-the Jacobian of the mapping, exact (the thesis renderer used 2 pi sin theta, pi too large).
+Importance sampling: the density over [0,1]^2 is the bilinear interpolation, between texel
+centres and with the lookup's wrapping and clamping, of luminance x sin(theta) at the texel
+centres: so it follows the bilinearly looked-up radiance, not a staircase of it (a
+piecewise-constant density, PBRT 3rd ed. sec. 14.2.4, leaves a sharp sun's bilinear skirt
+with up to 4x too little density: the fireflies of a sunlit scene). Mitsuba 3's envmap
+samples a bilinear density the same way (its Marginal2D). Sampling: a row cell (between two
+texel-centre rows; half cells at the clamped top and bottom) from the marginal CDF, v within
+it from its linear density, then a column cell from the row's CDF interpolated to that v
+(CDFs of bilinear patches are linear in v), and u within it from its linear density. A point
+(u, v) maps to a direction with solid-angle density p(u, v) / (2 pi^2 sin theta), the
+Jacobian of the mapping (the thesis renderer used 2 pi sin theta, pi too large).
 
-Arrays: ``env_img`` (H, W, 3) radiance with the intensity applied; ``env_marg`` (H + 1,)
-and ``env_cond`` (H, W + 1) CDFs; ``env_pdf`` (H, W) the density p(u, v) of each cell;
-``env_info`` (see :mod:`.layout`): the rotation's cosine and sine and the probability that
-next-event estimation picks the environment.
+Arrays: ``env_img`` (H, W, 3) radiance with the intensity applied; ``env_marg`` (H + 2,) the
+CDF over the H + 1 row cells; ``env_cond`` (H, W + 1) per texel row the unnormalised
+cumulative masses of its column cells (the last entry: the row's total); ``env_pdf`` (H, W)
+the density p(u, v) at each texel centre; ``env_info`` (see :mod:`.layout`): the rotation's
+cosine and sine and the probability that next-event estimation picks the environment.
 
 The device functions sample and evaluate these tables; :func:`environment_tables`, beside
 them, is the host code (NumPy) that builds them, so the two sides of the density stay
@@ -75,16 +81,41 @@ def env_eval(env_img, env_info, d):
 
 @device
 def env_pdf(env_pdf_arr, env_info, d):
-    """Solid-angle density with which env_sample produces direction d."""
+    """Solid-angle density with which env_sample produces direction d: the bilinear
+    interpolation of the texel-centre densities, as env_eval interpolates radiance."""
     h = env_pdf_arr.shape[0]
     w = env_pdf_arr.shape[1]
     u, v, y = env_uv(env_info, d)
     sin_t = math.sqrt(max(ONE - y * y, ZERO))
     if sin_t <= ZERO:
         return ZERO
-    i = min(max(int(u * np.float32(w)), 0), w - 1)
-    j = min(max(int(v * np.float32(h)), 0), h - 1)
-    return env_pdf_arr[j, i] / (TWO_PI_SQ * sin_t)
+    ix, iy, fx, fy = bilinear_cell(u * np.float32(w), v * np.float32(h))
+    i0 = ix % w
+    if i0 < 0:
+        i0 += w
+    i1 = i0 + 1
+    if i1 >= w:
+        i1 = 0
+    j0 = min(max(iy, 0), h - 1)
+    j1 = min(max(iy + 1, 0), h - 1)
+    a = env_pdf_arr[j0, i0] + fx * (env_pdf_arr[j0, i1] - env_pdf_arr[j0, i0])
+    b = env_pdf_arr[j1, i0] + fx * (env_pdf_arr[j1, i1] - env_pdf_arr[j1, i0])
+    return (a + fy * (b - a)) / (TWO_PI_SQ * sin_t)
+
+
+@device
+def sample_linear(a, b, xi):
+    """t in [0, 1] with density proportional to (1 - t) a + t b (a, b >= 0), by inverting
+    its CDF: the root of a quadratic, in the form that is stable when a is close to b."""
+    den = a + math.sqrt(max(a * a + xi * (b * b - a * a), ZERO))
+    if not (den > ZERO):
+        return xi
+    return min(xi * (a + b) / den, ONE)
+
+
+@device
+def _lerp_row(env_cond, j0, j1, t, i):
+    return env_cond[j0, i] + t * (env_cond[j1, i] - env_cond[j0, i])
 
 
 @device
@@ -92,16 +123,40 @@ def env_sample(env_marg, env_cond, env_pdf_arr, env_info, u1, u2):
     """(direction, solid-angle pdf); pdf = 0 means no sample."""
     h = env_pdf_arr.shape[0]
     w = env_pdf_arr.shape[1]
-    j = sample_discrete(env_marg, u1)
-    span = env_marg[j + 1] - env_marg[j]
-    fv = (u1 - env_marg[j]) / span if span > ZERO else HALF
-    i = sample_discrete(env_cond[j], u2)
-    span = env_cond[j, i + 1] - env_cond[j, i]
-    fu = (u2 - env_cond[j, i]) / span if span > ZERO else HALF
-    fv = min(max(fv, ZERO), ONE)
-    fu = min(max(fu, ZERO), ONE)
-    v = (np.float32(j) + fv) / np.float32(h)
-    u = (np.float32(i) + fu) / np.float32(w)
+    # the row cell k lies between texel rows k - 1 and k (clamped: half cells at the ends)
+    k = sample_discrete(env_marg, u1)
+    span = env_marg[k + 1] - env_marg[k]
+    xi = min(max((u1 - env_marg[k]) / span, ZERO), ONE) if span > ZERO else HALF
+    j0 = max(k - 1, 0)
+    j1 = min(k, h - 1)
+    t = sample_linear(env_cond[j0, w], env_cond[j1, w], xi)
+    # the column cell i (between texel columns i and i + 1, wrapping) from the row CDF at t
+    target = u2 * _lerp_row(env_cond, j0, j1, t, w)
+    lo = 0
+    hi = w
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if _lerp_row(env_cond, j0, j1, t, mid) <= target:
+            lo = mid
+        else:
+            hi = mid
+    c0 = _lerp_row(env_cond, j0, j1, t, lo)
+    c1 = _lerp_row(env_cond, j0, j1, t, lo + 1)
+    xi2 = min(max((target - c0) / (c1 - c0), ZERO), ONE) if c1 > c0 else HALF
+    i1 = lo + 1 if lo + 1 < w else 0
+    a = env_pdf_arr[j0, lo] + t * (env_pdf_arr[j1, lo] - env_pdf_arr[j0, lo])
+    b = env_pdf_arr[j0, i1] + t * (env_pdf_arr[j1, i1] - env_pdf_arr[j0, i1])
+    s = sample_linear(a, b, xi2)
+    p_uv = a + s * (b - a)
+    if k == 0:
+        v = HALF * t / np.float32(h)
+    elif k == h:
+        v = (np.float32(h) - HALF + HALF * t) / np.float32(h)
+    else:
+        v = (np.float32(k) - HALF + t) / np.float32(h)
+    u = (np.float32(lo) + HALF + s) / np.float32(w)
+    if u >= ONE:
+        u -= ONE
     theta = v * PI
     phi = (u - HALF) * TWO_PI
     sin_t, cos_t = sincos(theta)
@@ -109,44 +164,41 @@ def env_sample(env_marg, env_cond, env_pdf_arr, env_info, u1, u2):
     xm = sin_t * sin_p
     zm = -sin_t * cos_p
     c = env_info[ENV_COS_ROT]
-    s = env_info[ENV_SIN_ROT]
-    d = (xm * c + zm * s, cos_t, -xm * s + zm * c)
+    sn = env_info[ENV_SIN_ROT]
+    d = (xm * c + zm * sn, cos_t, -xm * sn + zm * c)
     if sin_t <= ZERO:
         return d, ZERO
-    return d, env_pdf_arr[j, i] / (TWO_PI_SQ * sin_t)
+    return d, p_uv / (TWO_PI_SQ * sin_t)
 
 
 # ---- Host side: the tables the functions above read ----------------------------------------
 
 def environment_tables(img):
-    """(image, marginal CDF, conditional CDFs, cell densities) of an equirectangular map
-    (float H x W x 3, linear radiance), or None when it is black everywhere. NumPy, on the
-    host: the piecewise-constant 2-D distribution that :func:`env_sample` draws from and
-    :func:`env_pdf` evaluates."""
+    """(image, marginal CDF, conditional cumulative masses, texel-centre densities) of an
+    equirectangular map (float H x W x 3, linear radiance), or None when it is black
+    everywhere. NumPy, on the host: the bilinear 2-D distribution that :func:`env_sample`
+    draws from and :func:`env_pdf` evaluates."""
     h, w = img.shape[:2]
     lum = img @ np.array([LUM_R, LUM_G, LUM_B], np.float64)
-    # mean of the bilinear reconstruction over each cell: [1, 6, 1] / 8 in u (wrapping)
-    # and v (clamped), so a cell is never given zero weight where the lookup is not zero
-    k = (np.roll(lum, 1, axis=1) + 6 * lum + np.roll(lum, -1, axis=1)) / 8
-    up = np.vstack([k[:1], k[:-1]])
-    down = np.vstack([k[1:], k[-1:]])
-    k = (up + 6 * k + down) / 8
     sin_t = np.sin(np.pi * (np.arange(h) + 0.5) / h)
-    wgt = k * sin_t[:, None]
-    total = wgt.sum()
+    wgt = np.maximum(lum, 0.0) * sin_t[:, None]
+    # column cell i spans texel centres i and i + 1 (wrapping): mass (w_i + w_i+1) / 2
+    cells = 0.5 * (wgt + np.roll(wgt, -1, axis=1))
+    rows = wgt.sum(axis=1)                     # = cells.sum(axis=1)
+    # row cells: half a cell above row 0, between rows k - 1 and k, half below row h - 1
+    height = np.ones(h + 1)
+    height[0] = height[-1] = 0.5
+    above = np.concatenate([rows[:1], rows])
+    below = np.concatenate([rows, rows[-1:]])
+    mass = height * 0.5 * (above + below)
+    total = mass.sum()
     if not total > 0:
         return None
-    pdf = wgt * (w * h) / total
-    rows = wgt.sum(axis=1)
-    marg = np.concatenate([[0.0], np.cumsum(rows) / rows.sum()])
+    scale = w * h / total                      # so that p(u, v) integrates to 1 over [0,1]^2
+    marg = np.concatenate([[0.0], np.cumsum(mass) / total])
     cond = np.zeros((h, w + 1))
-    for j in range(h):
-        if rows[j] > 0:
-            cond[j, 1:] = np.cumsum(wgt[j]) / rows[j]
-        else:
-            cond[j, 1:] = np.arange(1, w + 1) / w
+    cond[:, 1:] = np.cumsum(cells, axis=1) * scale
     marg = marg.astype(np.float32)
-    cond = cond.astype(np.float32)
     marg[-1] = 1.0
-    cond[:, -1] = 1.0
-    return img.astype(np.float32), marg, cond, pdf.astype(np.float32)
+    return (img.astype(np.float32), marg, cond.astype(np.float32),
+            (wgt * scale).astype(np.float32))

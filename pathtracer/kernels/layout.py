@@ -305,7 +305,7 @@ class SceneArrays(NamedTuple):
     tex_int: np.ndarray        # int32 (K, TEX_INT_WIDTH)
     tex_f: np.ndarray          # float32 (K, TEX_F_WIDTH)
     env_img: np.ndarray        # float32 (H, W, 3) see kernels.envmap
-    env_marg: np.ndarray       # float32 (H + 1,)
+    env_marg: np.ndarray       # float32 (H + 2,)
     env_cond: np.ndarray       # float32 (H, W + 1)
     env_pdf: np.ndarray        # float32 (H, W)
     env_info: np.ndarray       # float32 (ENV_INFO_SIZE,)
