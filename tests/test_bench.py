@@ -61,7 +61,10 @@ def test_quick_mode_writes_csv_plot_and_summary(tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     rows = list(csv.DictReader(open(tmp_path / "results.csv")))
     sections = {row["section"] for row in rows}
-    assert {"convergence", "throughput", "filtering", "bvh", "scaling", "compile"} <= sections
+    assert {"convergence", "samplers", "throughput", "filtering", "bvh", "scaling",
+            "compile"} <= sections
+    assert {row["renderer"] for row in rows if row["section"] == "samplers"} >= {
+        "pt-render cpu sobol", "pt-render cpu independent"}
     for row in rows:
         assert row["command"] and row["machine"] and row["date"]
         assert "numba=" in row["versions"]
