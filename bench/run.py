@@ -27,7 +27,7 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
-from bench.common import command, machine, now, usable_mitsuba, versions
+from bench.common import command, machine, median_time, now, usable_mitsuba, versions
 from bench.metrics import rays_per_second, relmse, time_to_threshold
 from bench.scenes import (CONVERGENCE, convergence_desc, load_reference,
                           mesh_desc)
@@ -35,7 +35,7 @@ from bench.scenes import (CONVERGENCE, convergence_desc, load_reference,
 FIELDS = ["section", "scene", "renderer", "parameter", "value", "metric", "result", "unit",
           "command", "machine", "date", "versions"]
 THRESHOLDS = (1e-2, 1e-3)
-SECTIONS = ("convergence", "samplers", "throughput", "filtering", "blocks", "bvh", "scaling",
+SECTIONS = ("convergence", "samplers", "denoise", "throughput", "filtering", "blocks", "bvh", "scaling",
             "compile")
 OUR_SAMPLERS = ("sobol", "independent")
 MITSUBA_SAMPLERS = ("independent", "multijitter", "ldsampler")
@@ -260,6 +260,45 @@ def section_samplers(scenes, backend_name, mitsuba_variant, spps, seeds, r):
     for (name, spp), errs in out.items():
         for renderer, err in errs.items():
             r.add("samplers", name, renderer, "relMSE", err, "", "spp", spp)
+    return out
+
+
+def section_denoise(scenes, backend_name, low_spp, high_spp, repeats, r):
+    """relMSE of the raw image at low_spp, of it denoised (Open Image Denoise with our
+    albedo and normal images; biased) and of the raw image at high_spp, against the scene's
+    reference; the denoiser's and the auxiliary pass's times (median of ``repeats``).
+    {scene: record}."""
+    from pathtracer.backends import make_backend
+    from pathtracer.denoise import AOV_SPP, denoise
+    from pathtracer.render import render
+    from pathtracer.scene import compile_scene
+    out = {}
+    for name in scenes:
+        try:
+            ref, _ = load_reference(name)
+        except FileNotFoundError:
+            continue
+        scene = compile_scene(convergence_desc(name))
+        backend = make_backend(backend_name, scene)
+        backend.compile()
+        backend.aovs(1, 0)                                   # compile the auxiliary pass
+        low = render(scene, backend, spp=low_spp).film.image()
+        t_aov, _ = median_time(lambda: backend.aovs(AOV_SPP, 0), repeats)
+        aovs = backend.aovs(AOV_SPP, 0)
+        denoise(low, aovs)                                   # the denoiser's set-up
+        t_dn, _ = median_time(lambda: denoise(low, aovs), repeats)
+        rec = {"low_spp": low_spp, "high_spp": high_spp,
+               "raw_low": relmse(low, ref), "denoised_low": relmse(denoise(low, aovs), ref),
+               "raw_high": relmse(render(scene, backend, spp=high_spp).film.image(), ref),
+               "denoise_s": t_dn, "aov_s": t_aov}
+        out[name] = rec
+        for k in ("raw_low", "denoised_low", "raw_high"):
+            r.add("denoise", name, f"pt-render {backend_name}", f"relMSE_{k}", rec[k], "",
+                  "spp", low_spp if k != "raw_high" else high_spp)
+        r.add("denoise", name, f"pt-render {backend_name}", "denoise_seconds", t_dn, "s",
+              "pixels", scene.width * scene.height)
+        r.add("denoise", name, f"pt-render {backend_name}", "aov_seconds", t_aov, "s",
+              "spp", AOV_SPP)
     return out
 
 
@@ -508,6 +547,16 @@ def summary(r, res, args):
                 cells.append("" if e is None else f"{e:.3g}" +
                              (f" ({e / base:.2f})" if base else ""))
             lines.append(f"| {scene} | {spp} | " + " | ".join(cells) + " |")
+    if res["denoise"]:
+        lines += ["", "## Denoising (Open Image Denoise, CPU; biased)", "",
+                  "relMSE against each scene's reference; the denoiser is guided by our albedo "
+                  "and normal images (first non-specular hit).", "",
+                  "| scene | raw, low spp | denoised, low spp | raw, high spp | denoise s | "
+                  "albedo+normal pass s |", "|---|---|---|---|---|---|"]
+        for scene, x in res["denoise"].items():
+            lines.append(f"| {scene} | {x['raw_low']:.3g} ({x['low_spp']} spp) | "
+                         f"{x['denoised_low']:.3g} | {x['raw_high']:.3g} ({x['high_spp']} spp) "
+                         f"| {x['denoise_s']:.3g} | {x['aov_s']:.3g} |")
     thr = res["throughput"]
     if thr:
         lines += ["", "## Throughput (Cornell box)", "",
@@ -644,7 +693,7 @@ def main(argv=None):
         max_spp, tp, repeats, filt_res, mres = 1024, ((256, 256), 16), 7, (320, 240), ((96, 96), 4)
     t0 = time.perf_counter()
     want = set(args.sections)
-    res = {"convergence": ({}, {}), "samplers": {}, "throughput": {}, "filtering": {}, "blocks": {}, "bvh": [],
+    res = {"convergence": ({}, {}), "samplers": {}, "denoise": {}, "throughput": {}, "filtering": {}, "blocks": {}, "bvh": [],
            "scaling": [], "compile": {}}
     if "convergence" in want:
         res["convergence"] = section_convergence(args.scenes, [b], peer, max_spp, r)
@@ -654,6 +703,10 @@ def main(argv=None):
         res["samplers"] = section_samplers(args.scenes[:1] if args.tiny else args.scenes, b,
                                            peer, spps,
                                            1 if args.tiny else 3 if args.quick else 4, r)
+    if "denoise" in want:
+        res["denoise"] = section_denoise(
+            args.scenes[:1] if args.tiny else args.scenes, b, 2 if args.tiny else 16,
+            4 if args.tiny else 256, 1 if args.tiny else 3, r)
     if "throughput" in want:
         res["throughput"] = section_throughput([b], tp[0], tp[1], repeats, r)
     if "filtering" in want:

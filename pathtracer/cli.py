@@ -102,6 +102,12 @@ def build_parser():
                    help="override the camera resolution")
     p.add_argument("--max-bounces", type=_integer(0, limits.MAX_BOUNCES),
                    help="override render.maxBounces")
+    p.add_argument("--denoise", action="store_true",
+                   help="denoise with Open Image Denoise (CPU), guided by albedo and normal "
+                        "images: OUTPUT is the denoised image, OUTPUT_STEM-raw.EXT the raw one")
+    p.add_argument("--aovs", action="store_true",
+                   help="also write the albedo and normal images (OUTPUT_STEM-albedo.exr, "
+                        "OUTPUT_STEM-normal.exr; .npy for a .npy output)")
     p.add_argument("--sampler", choices=SAMPLERS,
                    help="sobol (Owen-scrambled, low discrepancy) or independent; "
                         "default: the scene's render.sampler (sobol)")
@@ -317,7 +323,19 @@ def _render(args, signals):
     if ext not in ALL_FORMATS:
         raise InputError(f"--output {output}: unknown image format {ext!r} "
                          f"(use {', '.join(ALL_FORMATS)})")
-    targets = [output] + ([os.path.splitext(output)[0] + ".exr"] if ext == ".png" else [])
+    stem = os.path.splitext(output)[0]
+    targets = [output] + ([stem + ".exr"] if ext == ".png" else [])
+    # with --denoise: (path, what) for each file: "image" (denoised), "raw", "albedo", "normal"
+    kinds = ["image"] * len(targets)
+    if args.denoise:
+        from .denoise import check_available
+        check_available()
+        raw = [os.path.splitext(t)[0] + "-raw" + os.path.splitext(t)[1] for t in targets]
+        targets, kinds = targets + raw, kinds + ["raw"] * len(raw)
+    if args.aovs:
+        aov_ext = ".npy" if ext == ".npy" else ".exr"
+        targets += [stem + "-albedo" + aov_ext, stem + "-normal" + aov_ext]
+        kinds += ["albedo", "normal"]
     for t in targets:
         _check_writable_folder(t, "--output")
     csv_path = None
@@ -380,9 +398,33 @@ def _render(args, signals):
     compile_seconds = time.perf_counter() - t0
     if not args.quiet:
         print(f"pt-render: kernels ready in {compile_seconds:.2f} s", file=log)
+    aovs = None
+    if args.denoise or args.aovs:
+        from .denoise import AOV_SPP
+        t_aov = time.perf_counter()
+        aovs = backend.aovs(AOV_SPP, scene.seed if args.seed is None else args.seed)
+        if not args.quiet:
+            print(f"pt-render: albedo and normal images ({AOV_SPP} spp) in "
+                  f"{time.perf_counter() - t_aov:.2f} s", file=log)
     progress = Progress(spp, args.time, scene.width * scene.height, quiet=args.quiet,
                         stream=log)
     saver = Saver(targets, signals, lambda m: progress.write(f"pt-render: warning: {m}"))
+    denoise_seconds = []
+
+    def outputs(image):
+        """The image of each target: denoised, raw or auxiliary."""
+        if kinds == ["image"] * len(kinds):
+            return image
+        shown = image
+        if args.denoise:
+            from .denoise import denoise
+            t_dn = time.perf_counter()
+            shown = denoise(image, aovs)
+            denoise_seconds.append(time.perf_counter() - t_dn)
+        pick = {"image": shown, "raw": image}
+        if aovs is not None:
+            pick["albedo"], pick["normal"] = aovs[..., :3], aovs[..., 3:]
+        return [pick[k] for k in kinds]
     rows = []
     next_write = [1.0]
 
@@ -393,7 +435,7 @@ def _render(args, signals):
             rows.append((elapsed, film.spp, err))
             progress.write(f"{elapsed:10.3f} s {film.spp:8d} spp  relMSE {err:.6g}")
         if elapsed >= next_write[0]:
-            saver.periodic(film.image())
+            saver.periodic(outputs(film.image()))
             next_write[0] = elapsed * 2   # refresh at growing intervals
 
     if reference is not None:
@@ -408,7 +450,10 @@ def _render(args, signals):
             print("pt-render: stopped before the first pass; no image written", file=log)
             return 128 + result.signal
         raise OutputError("no samples were rendered; no image written")
-    written = saver.final(film.image())
+    written = saver.final(outputs(film.image()))
+    if denoise_seconds:
+        print(f"pt-render: denoised {len(denoise_seconds)} time(s), the last in "
+              f"{denoise_seconds[-1]:.2f} s (Open Image Denoise, CPU)", file=log)
     if reference is not None:
         try:
             with signals.deferred(raise_after=False), open(csv_path, "w", newline="") as f:

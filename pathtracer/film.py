@@ -116,12 +116,14 @@ def write_image(path, image):
 
 
 def write_images(paths, image):
-    """Write ``image`` to each of ``paths`` (a PNG and its float twin) as one unit: every
+    """Write ``image`` (or, a list, image i to path i) to each of ``paths`` (a PNG and its
+    float twin; with the denoiser also the raw image and the auxiliary images) as one unit: every
     file is encoded and written to a temporary file beside its target first, and only
     when all are complete are they renamed over the targets, so the files never come
     from different passes and a reader never sees half of one. On failure nothing is
     replaced and no temporary file is left."""
-    data = [encode(image, os.path.splitext(p)[1]) for p in paths]
+    images = image if isinstance(image, (list, tuple)) else [image] * len(paths)
+    data = [encode(im, os.path.splitext(p)[1]) for im, p in zip(images, paths)]
     temps = []
     try:
         umask = os.umask(0)

@@ -116,3 +116,15 @@ def test_full_feature_parity(tmp_path):
     assert np.isclose(a.sum(), b.sum(), rtol=1e-3)
     close = np.isclose(a, b, rtol=1e-3, atol=1e-3 * max(1.0, float(a.max()))).all(-1)
     assert close.mean() > 0.99      # a rounding may flip a rare discrete decision
+
+
+@gpu
+def test_aov_parity(tmp_path):
+    """The denoiser's albedo and normal images are the same on the CPU and the GPU."""
+    from pathtracer.backends import make_backend
+    s = _full_feature_scene(tmp_path)
+    a = make_backend("cpu", s).aovs(8, 3)
+    b = make_backend("cuda", s).aovs(8, 3)
+    assert np.isfinite(a).all() and np.isfinite(b).all()
+    close = np.isclose(a, b, rtol=1e-3, atol=1e-3).all(-1)
+    assert close.mean() > 0.99

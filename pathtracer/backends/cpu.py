@@ -7,7 +7,7 @@ from numba import njit, prange
 from .._cache import jit_cache
 
 from ..kernels.constants import STACK_SIZE
-from ..kernels.integrator import make_render_pixel
+from ..kernels.integrator import make_aov_pixel, make_render_pixel
 
 
 @functools.lru_cache(maxsize=None)
@@ -26,6 +26,20 @@ def pass_kernel(features):
     return render_pass
 
 
+@functools.lru_cache(maxsize=None)
+def aov_kernel(features):
+    aov_pixel = make_aov_pixel(features)
+
+    @njit(parallel=True, cache=jit_cache(), error_model="numpy")
+    def aov_pass(out, n_samples, seed, scene):
+        for py in prange(out.shape[0]):
+            stack = np.empty(STACK_SIZE, np.int32)
+            for px in range(out.shape[1]):
+                aov_pixel(px, py, n_samples, seed, scene, stack, out)
+
+    return aov_pass
+
+
 class CPUBackend:
     name = "cpu"
 
@@ -38,6 +52,12 @@ class CPUBackend:
     def compile(self):
         """Compile (or load from the disk cache) without rendering."""
         self.render_pass(0, 0, 0, 0, 0)
+
+    def aovs(self, n_samples, seed):
+        """The denoiser's albedo and normal images (float32 HxWx6, see aov_pixel)."""
+        out = np.zeros((self.scene.height, self.scene.width, 6), np.float32)
+        aov_kernel(self.scene.features)(out, n_samples, seed, self.scene.arrays)
+        return out
 
     def render_pass(self, sample_start, n_samples, seed, max_bounces, rr_depth):
         """Sums over n_samples paths per pixel (float32 HxWx3) and ray/NaN counts (HxWx3)."""

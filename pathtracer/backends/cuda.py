@@ -17,7 +17,7 @@ from numba import config, cuda
 from .._cache import jit_cache
 
 from ..kernels.constants import STACK_SIZE
-from ..kernels.integrator import SceneArrays, make_render_pixel
+from ..kernels.integrator import SceneArrays, make_aov_pixel, make_render_pixel
 
 BLOCK = (16, 8)
 # Threads a launch aims at: several waves of the largest GPUs' resident threads (an H200:
@@ -66,6 +66,20 @@ def pass_kernel(features, max_registers=None, fast=False):
                          scene, stack, out[g], stats[g])
 
     return render_pass
+
+
+@functools.lru_cache(maxsize=None)
+def aov_kernel(features):
+    aov_pixel = make_aov_pixel(features, "cuda")
+
+    @cuda.jit(cache=jit_cache())
+    def aov_pass(out, n_samples, seed, scene):
+        px, py = cuda.grid(2)
+        if px < out.shape[1] and py < out.shape[0]:
+            stack = cuda.local.array(STACK_SIZE, np.int32)
+            aov_pixel(px, py, n_samples, seed, scene, stack, out)
+
+    return aov_pass
 
 
 @cuda.jit(cache=jit_cache())
@@ -146,6 +160,13 @@ class CUDABackend:
         self.d_out.copy_to_host(self.out)
         self.d_stats.copy_to_host(self.stats)
         return self.out, self.stats
+
+    def aovs(self, n_samples, seed):
+        """The denoiser's albedo and normal images (float32 HxWx6, see aov_pixel)."""
+        d = cuda.device_array((self.scene.height, self.scene.width, 6), np.float32)
+        aov_kernel(self.scene.features)[self.grid, self.block](d, n_samples, seed,
+                                                               self.d_scene)
+        return d.copy_to_host()
 
     def ptx(self):
         """PTX of the compiled pass kernel (to check for float64 instructions)."""

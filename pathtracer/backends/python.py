@@ -2,7 +2,7 @@
 import numpy as np
 
 from ..kernels.constants import STACK_SIZE
-from ..kernels.integrator import make_render_pixel
+from ..kernels.integrator import make_aov_pixel, make_render_pixel
 
 
 class PythonBackend:
@@ -28,3 +28,15 @@ class PythonBackend:
                 self.render_pixel(px, py, sample_start, n_samples, seed, max_bounces, rr_depth,
                                   self.scene.arrays, stack, self.out, self.stats)
         return self.out, self.stats
+
+    def aovs(self, n_samples, seed):
+        """The denoiser's albedo and normal images (float32 HxWx6, see aov_pixel)."""
+        aov_pixel = make_aov_pixel(self.scene.features, "python")
+        out = np.zeros((self.scene.height, self.scene.width, 6), np.float32)
+        stack = np.empty(STACK_SIZE, np.int32)
+        pixels = self.pixels or [(x, y) for y in range(self.scene.height)
+                                 for x in range(self.scene.width)]
+        with np.errstate(all="ignore"):
+            for px, py in pixels:
+                aov_pixel(px, py, n_samples, seed, self.scene.arrays, stack, out)
+        return out

@@ -30,8 +30,8 @@ from .device import entry_marker, step_marker
 from .emitters import make_emitters
 from .layout import (D_BSDF_LOBE, D_BSDF_U, D_BSDF_V, D_FIRST_BOUNCE, D_LENS_U, D_LENS_V,
                      D_LIGHT_SELECT, D_LIGHT_U, D_LIGHT_V, D_PIXEL_X, D_PIXEL_Y, D_RR,
-                     DIMS_PER_BOUNCE, P_TRANSMISSION, STAT_BOUNCE_RAYS, STAT_NONFINITE,
-                     STAT_SHADOW_RAYS, TRI_E1, TRI_E2, TRI_V0, Features, SceneArrays,
+                     DIMS_PER_BOUNCE, P_METALLIC, P_ROUGHNESS, P_TRANSMISSION,
+                     STAT_BOUNCE_RAYS, STAT_NONFINITE, STAT_SHADOW_RAYS, TRI_E1, TRI_E2, TRI_V0, Features, SceneArrays,
                      specialise)
 from .rng import make_sampler
 from .scatter import make_scatter
@@ -43,9 +43,30 @@ from .warps import power_heuristic
 __all__ = ["Features", "SceneArrays", "make_render_pixel"]
 
 
+# Auxiliary images for the denoiser (aov_pixel): a surface counts as specular, and the
+# albedo and normal are taken further along the path, when its GGX roughness is below this
+# and it is mostly metal or glass (the principled BSDF has no true delta lobe).
+AOV_SPECULAR_ROUGHNESS = np.float32(0.1)
+AOV_MAX_SPECULAR = 8        # specular surfaces followed at most
+HALF_F = np.float32(0.5)
+
+
 @functools.lru_cache(maxsize=None)
 def make_render_pixel(features, target="cpu"):
     """Compile-time specialisation: returns ``render_pixel`` for scenes with ``features``."""
+    return make_kernels(features, target)[0]
+
+
+@functools.lru_cache(maxsize=None)
+def make_aov_pixel(features, target="cpu"):
+    """``aov_pixel`` (albedo and normal images for the denoiser) for scenes with
+    ``features``."""
+    return make_kernels(features, target)[1]
+
+
+@functools.lru_cache(maxsize=None)
+def make_kernels(features, target="cpu"):
+    """Compile-time specialisation: (render_pixel, aov_pixel) for scenes with ``features``."""
     S = specialise(features)
     step = step_marker(target)
     entry = entry_marker(target)
@@ -235,4 +256,72 @@ def make_render_pixel(features, target="cpu"):
         stats[py, px, STAT_SHADOW_RAYS] = n_shadow
         stats[py, px, STAT_NONFINITE] = n_bad
 
-    return render_pixel
+    @entry
+    def aov_pixel(px, py, n_samples, seed, scene, stack, out):
+        """The denoiser's auxiliary images at pixel (px, py): out[py, px, 0:3] the albedo
+        (base colour) and out[py, px, 3:6] the world-space shading normal at the first
+        surface that is not specular (AOV_SPECULAR_ROUGHNESS), the mean of n_samples camera
+        rays (the sampler's own camera and BSDF numbers). A ray that leaves the scene gives
+        the environment's radiance clamped to [0, 1] as albedo and a zero normal (Open Image
+        Denoise's convention for "no surface")."""
+        height = out.shape[0]
+        width = out.shape[1]
+        acc = (ZERO, ZERO, ZERO)
+        nacc = (ZERO, ZERO, ZERO)
+        for sample in range(n_samples):
+            state = start_path(py * width + px, sample, seed)
+            o, d = camera_ray(scene.cam, px, py, state, width, height)
+            skip = -1
+            albedo = (ZERO, ZERO, ZERO)
+            normal = (ZERO, ZERO, ZERO)
+            for bounce in range(AOV_MAX_SPECULAR + 1):
+                t, tri, b1, b2 = closest_hit(o, d, INF, skip, scene.tri_v, scene.bvh_box,
+                                             scene.bvh_child, stack)
+                if tri < 0:
+                    if ANY_ENVIRONMENT:
+                        le, weight = escaped(scene.env, scene.env_img, scene.env_pdf,
+                                             scene.env_info, d, ZERO)
+                        albedo = (min(max(le[0], ZERO), ONE), min(max(le[1], ZERO), ONE),
+                                  min(max(le[2], ZERO), ONE))
+                    break
+                v0 = load3(scene.tri_v, tri, TRI_V0)
+                e1 = load3(scene.tri_v, tri, TRI_E1)
+                e2 = load3(scene.tri_v, tri, TRI_E2)
+                p = madd(madd(v0, e1, b1), e2, b2)
+                ng = normalize(cross(e1, e2))
+                wo = neg(d)
+                m = scene.tri_mat[tri]
+                tu, tv = tri_uv_at(scene.tri_uv, tri, b1, b2)
+                is_principled, params = material_at(scene.mat, scene.mat_tex, scene.tex_data,
+                                                    scene.tex_int, scene.tex_f, m, tu, tv)
+                ng, ns, tangent, bitangent = shading_frame(
+                    scene.tri_n, scene.tri_t, scene.mat_tex, scene.tex_data, scene.tex_int,
+                    scene.tex_f, tri, m, b1, b2, e1, ng, wo, params[P_TRANSMISSION] > ZERO,
+                    tu, tv)
+                albedo = (min(params[0], ONE), min(params[1], ONE), min(params[2], ONE))
+                normal = ns
+                specular = is_principled and params[P_ROUGHNESS] < AOV_SPECULAR_ROUGHNESS and (
+                    params[P_METALLIC] > HALF_F or params[P_TRANSMISSION] > HALF_F)
+                if not specular or bounce == AOV_MAX_SPECULAR:
+                    break
+                wo_l = local_wo(wo, tangent, bitangent, ns)
+                origin = ray_origin(scene.tri_n, tri, p, b1, b2, v0, e1, e2, ng)
+                dim = D_FIRST_BOUNCE + bounce * DIMS_PER_BOUNCE
+                dims = open_set(state, dim + D_BSDF_U)
+                wi, weight, pdf_bsdf = sample_world(
+                    is_principled, params, wo, wo_l, tangent, bitangent, ns, ng,
+                    draw(state, dims, dim + D_BSDF_LOBE), draw(state, dims, dim + D_BSDF_U),
+                    draw(state, dims, dim + D_BSDF_V))
+                if not (pdf_bsdf > ZERO):
+                    break
+                o = leave(p, ng, wi, origin)
+                d = wi
+                skip = tri
+            acc = add(acc, albedo)
+            nacc = add(nacc, normal)
+        inv = ONE / np.float32(max(n_samples, 1))
+        for c in range(3):
+            out[py, px, c] = acc[c] * inv
+            out[py, px, 3 + c] = nacc[c] * inv
+
+    return render_pixel, aov_pixel

@@ -1,0 +1,37 @@
+"""Denoising with Intel Open Image Denoise (OIDN) through its maintained Python binding,
+``pyoidn`` (PyPI), on the CPU.
+
+The renderer supplies OIDN's auxiliary images (``backend.aovs``, kernel ``aov_pixel``): the
+albedo (base colour) and the world-space shading normal at the first surface that is not
+specular (metal or glass with roughness below 0.1 is looked through), averaged over
+``AOV_SPP`` camera rays per pixel; a ray that leaves the scene gives the environment's
+radiance clamped to [0, 1] as albedo and a zero normal. The colour is denoised as HDR
+(linear radiance, any range). A denoised image is an estimate, not an unbiased one: the
+raw image is always written beside it.
+"""
+import importlib
+
+import numpy as np
+
+from .errors import InputError
+
+AOV_SPP = 16    # camera rays per pixel of the auxiliary images
+
+
+def check_available():
+    """Raise InputError, before any rendering, when pyoidn cannot be imported."""
+    try:
+        importlib.import_module("pyoidn")
+    except Exception as e:      # ImportError, or a library that fails to load
+        raise InputError(f"--denoise needs Open Image Denoise's Python binding "
+                         f"(pip install pyoidn): {type(e).__name__}: {e}") from None
+
+
+def denoise(color, aovs):
+    """The denoised image (float32 HxWx3) of ``color`` (linear HDR) with the auxiliary
+    images ``aovs`` (HxWx6: albedo, normal)."""
+    import pyoidn
+    albedo = np.ascontiguousarray(np.clip(aovs[..., :3], 0.0, 1.0), np.float32)
+    normal = np.ascontiguousarray(np.clip(aovs[..., 3:], -1.0, 1.0), np.float32)
+    color = np.ascontiguousarray(np.maximum(color, 0.0), np.float32)
+    return pyoidn.denoise(color, albedo, normal, hdr=True)
