@@ -423,7 +423,9 @@ def _render(args, signals):
             denoise_seconds.append(time.perf_counter() - t_dn)
         pick = {"image": shown, "raw": image}
         if aovs is not None:
-            pick["albedo"], pick["normal"] = aovs[..., :3], aovs[..., 3:]
+            from .kernels.layout import AOV_ALBEDO, AOV_NORMAL
+            pick["albedo"] = aovs[..., AOV_ALBEDO:AOV_ALBEDO + 3]
+            pick["normal"] = aovs[..., AOV_NORMAL:AOV_NORMAL + 3]
         return [pick[k] for k in kinds]
     rows = []
     next_write = [1.0]

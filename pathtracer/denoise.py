@@ -14,6 +14,7 @@ import importlib
 import numpy as np
 
 from .errors import InputError
+from .kernels.layout import AOV_ALBEDO, AOV_NORMAL
 
 AOV_SPP = 16    # camera rays per pixel of the auxiliary images
 
@@ -29,9 +30,11 @@ def check_available():
 
 def denoise(color, aovs):
     """The denoised image (float32 HxWx3) of ``color`` (linear HDR) with the auxiliary
-    images ``aovs`` (HxWx6: albedo, normal)."""
+    images ``aovs`` (H x W x AOV_WIDTH, layout AOV_*: albedo, normal)."""
     import pyoidn
-    albedo = np.ascontiguousarray(np.clip(aovs[..., :3], 0.0, 1.0), np.float32)
-    normal = np.ascontiguousarray(np.clip(aovs[..., 3:], -1.0, 1.0), np.float32)
+    albedo = np.ascontiguousarray(np.clip(aovs[..., AOV_ALBEDO:AOV_ALBEDO + 3], 0.0, 1.0),
+                                  np.float32)
+    normal = np.ascontiguousarray(np.clip(aovs[..., AOV_NORMAL:AOV_NORMAL + 3], -1.0, 1.0),
+                                  np.float32)
     color = np.ascontiguousarray(np.maximum(color, 0.0), np.float32)
     return pyoidn.denoise(color, albedo, normal, hdr=True)

@@ -7,6 +7,7 @@ from numba import njit, prange
 from .._cache import jit_cache
 
 from ..kernels.constants import STACK_SIZE
+from ..kernels.layout import AOV_WIDTH
 from ..kernels.integrator import make_aov_pixel, make_render_pixel
 
 
@@ -54,8 +55,8 @@ class CPUBackend:
         self.render_pass(0, 0, 0, 0, 0)
 
     def aovs(self, n_samples, seed):
-        """The denoiser's albedo and normal images (float32 HxWx6, see aov_pixel)."""
-        out = np.zeros((self.scene.height, self.scene.width, 6), np.float32)
+        """The denoiser's albedo and normal images (float32 H x W x AOV_WIDTH, see aov_pixel)."""
+        out = np.zeros((self.scene.height, self.scene.width, AOV_WIDTH), np.float32)
         aov_kernel(self.scene.features)(out, n_samples, seed, self.scene.arrays)
         return out
 

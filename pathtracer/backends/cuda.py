@@ -17,6 +17,7 @@ from numba import config, cuda
 from .._cache import jit_cache
 
 from ..kernels.constants import STACK_SIZE
+from ..kernels.layout import AOV_WIDTH
 from ..kernels.integrator import SceneArrays, make_aov_pixel, make_render_pixel
 
 BLOCK = (16, 8)
@@ -162,8 +163,8 @@ class CUDABackend:
         return self.out, self.stats
 
     def aovs(self, n_samples, seed):
-        """The denoiser's albedo and normal images (float32 HxWx6, see aov_pixel)."""
-        d = cuda.device_array((self.scene.height, self.scene.width, 6), np.float32)
+        """The denoiser's albedo and normal images (float32 H x W x AOV_WIDTH, see aov_pixel)."""
+        d = cuda.device_array((self.scene.height, self.scene.width, AOV_WIDTH), np.float32)
         aov_kernel(self.scene.features)[self.grid, self.block](d, n_samples, seed,
                                                                self.d_scene)
         return d.copy_to_host()

@@ -2,6 +2,7 @@
 import numpy as np
 
 from ..kernels.constants import STACK_SIZE
+from ..kernels.layout import AOV_WIDTH
 from ..kernels.integrator import make_aov_pixel, make_render_pixel
 
 
@@ -30,9 +31,9 @@ class PythonBackend:
         return self.out, self.stats
 
     def aovs(self, n_samples, seed):
-        """The denoiser's albedo and normal images (float32 HxWx6, see aov_pixel)."""
+        """The denoiser's albedo and normal images (float32 H x W x AOV_WIDTH, see aov_pixel)."""
         aov_pixel = make_aov_pixel(self.scene.features, "python")
-        out = np.zeros((self.scene.height, self.scene.width, 6), np.float32)
+        out = np.zeros((self.scene.height, self.scene.width, AOV_WIDTH), np.float32)
         stack = np.empty(STACK_SIZE, np.int32)
         pixels = self.pixels or [(x, y) for y in range(self.scene.height)
                                  for x in range(self.scene.width)]

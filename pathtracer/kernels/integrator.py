@@ -28,10 +28,11 @@ from .camera import pinhole_ray, thin_lens_ray
 from .constants import INF, ONE, RR_MAX, ZERO
 from .device import entry_marker, step_marker
 from .emitters import make_emitters
-from .layout import (D_BSDF_LOBE, D_BSDF_U, D_BSDF_V, D_FIRST_BOUNCE, D_LENS_U, D_LENS_V,
-                     D_LIGHT_SELECT, D_LIGHT_U, D_LIGHT_V, D_PIXEL_X, D_PIXEL_Y, D_RR,
-                     DIMS_PER_BOUNCE, P_METALLIC, P_ROUGHNESS, P_TRANSMISSION,
-                     STAT_BOUNCE_RAYS, STAT_NONFINITE, STAT_SHADOW_RAYS, TRI_E1, TRI_E2, TRI_V0, Features, SceneArrays,
+from .layout import (AOV_ALBEDO, AOV_NORMAL, D_BSDF_LOBE, D_BSDF_U, D_BSDF_V,
+                     D_FIRST_BOUNCE, D_LENS_U, D_LENS_V, D_LIGHT_SELECT, D_LIGHT_U, D_LIGHT_V,
+                     D_PIXEL_X, D_PIXEL_Y, D_RR, DIMS_PER_BOUNCE, P_BASE, P_METALLIC,
+                     P_ROUGHNESS, P_TRANSMISSION, STAT_BOUNCE_RAYS, STAT_NONFINITE,
+                     STAT_SHADOW_RAYS, TRI_E1, TRI_E2, TRI_V0, Features, SceneArrays,
                      specialise)
 from .rng import make_sampler
 from .scatter import make_scatter
@@ -258,8 +259,8 @@ def make_kernels(features, target="cpu"):
 
     @entry
     def aov_pixel(px, py, n_samples, seed, scene, stack, out):
-        """The denoiser's auxiliary images at pixel (px, py): out[py, px, 0:3] the albedo
-        (base colour) and out[py, px, 3:6] the world-space shading normal at the first
+        """The denoiser's auxiliary images at pixel (px, py) (layout AOV_*): the albedo
+        (base colour) and the world-space shading normal at the first
         surface that is not specular (AOV_SPECULAR_ROUGHNESS), the mean of n_samples camera
         rays (the sampler's own camera and BSDF numbers). A ray that leaves the scene gives
         the environment's radiance clamped to [0, 1] as albedo and a zero normal (Open Image
@@ -298,7 +299,8 @@ def make_kernels(features, target="cpu"):
                     scene.tri_n, scene.tri_t, scene.mat_tex, scene.tex_data, scene.tex_int,
                     scene.tex_f, tri, m, b1, b2, e1, ng, wo, params[P_TRANSMISSION] > ZERO,
                     tu, tv)
-                albedo = (min(params[0], ONE), min(params[1], ONE), min(params[2], ONE))
+                albedo = (min(params[P_BASE], ONE), min(params[P_BASE + 1], ONE),
+                          min(params[P_BASE + 2], ONE))
                 normal = ns
                 specular = is_principled and params[P_ROUGHNESS] < AOV_SPECULAR_ROUGHNESS and (
                     params[P_METALLIC] > HALF_F or params[P_TRANSMISSION] > HALF_F)
@@ -321,7 +323,7 @@ def make_kernels(features, target="cpu"):
             nacc = add(nacc, normal)
         inv = ONE / np.float32(max(n_samples, 1))
         for c in range(3):
-            out[py, px, c] = acc[c] * inv
-            out[py, px, 3 + c] = nacc[c] * inv
+            out[py, px, AOV_ALBEDO + c] = acc[c] * inv
+            out[py, px, AOV_NORMAL + c] = nacc[c] * inv
 
     return render_pixel, aov_pixel

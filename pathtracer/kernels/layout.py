@@ -214,6 +214,11 @@ STAT_SHADOW_RAYS = 1
 STAT_NONFINITE = 2
 STATS_WIDTH = 3
 
+# ---- Auxiliary images for the denoiser: aovs, float32 (H, W, AOV_WIDTH) -----------------------
+AOV_ALBEDO = 0        # rgb
+AOV_NORMAL = 3        # xyz, world space
+AOV_WIDTH = 6
+
 # ---- Random dimensions of a path (kernels.rng) -------------------------------------------------
 # In sets of four (the sobol sampler draws each set from one 4-D Sobol sequence, the first
 # two dimensions of a set best stratified): set 0 the camera, then per scattering event a
