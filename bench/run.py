@@ -35,7 +35,7 @@ from bench.scenes import (CONVERGENCE, convergence_desc, load_reference,
 FIELDS = ["section", "scene", "renderer", "parameter", "value", "metric", "result", "unit",
           "command", "machine", "date", "versions"]
 THRESHOLDS = (1e-2, 1e-3)
-SECTIONS = ("convergence", "samplers", "denoise", "throughput", "filtering", "blocks", "bvh", "scaling",
+SECTIONS = ("convergence", "samplers", "denoise", "adaptive", "throughput", "filtering", "blocks", "bvh", "scaling",
             "compile")
 OUR_SAMPLERS = ("sobol", "independent")
 MITSUBA_SAMPLERS = ("independent", "multijitter", "ldsampler")
@@ -63,8 +63,9 @@ class Results:
 # ---------------------------------------------------------------------------------------
 # Error against run time
 
-def convergence_ours(backend_name, name, max_spp):
-    """(seconds, spp, relMSE) after each progressive pass, compile excluded."""
+def convergence_ours(backend_name, name, max_spp, adaptive=None):
+    """(seconds, spp, relMSE) after each progressive pass, compile excluded; ``adaptive``:
+    adaptive sampling to that per-pixel relMSE (render's ``adaptive``)."""
     from pathtracer.backends import make_backend
     from pathtracer.render import render
     from pathtracer.scene import compile_scene
@@ -78,7 +79,8 @@ def convergence_ours(backend_name, name, max_spp):
         points.append((elapsed, film.spp, relmse(film.image(), ref)))
 
     # passes of 1, 2, 4, ... spp: the error is measured at doubling sample counts
-    render(scene, backend, spp=max_spp, on_pass=on_pass, pass_seconds=float("inf"))
+    render(scene, backend, spp=max_spp, on_pass=on_pass, pass_seconds=float("inf"),
+           adaptive=adaptive)
     return points
 
 
@@ -260,6 +262,32 @@ def section_samplers(scenes, backend_name, mitsuba_variant, spps, seeds, r):
     for (name, spp), errs in out.items():
         for renderer, err in errs.items():
             r.add("samplers", name, renderer, "relMSE", err, "", "spp", spp)
+    return out
+
+
+ADAPTIVE_TARGET = 5e-4    # per-pixel relMSE at which adaptive sampling stops a pixel (half
+#                           the 1e-3 the time is measured to)
+
+
+def section_adaptive(scenes, backend_name, max_spp, r):
+    """Time to relMSE 1e-2 and 1e-3 with uniform and with adaptive sampling (target
+    ADAPTIVE_TARGET), both progressive from 1 (2) spp. {scene: {mode: points}}."""
+    out = {}
+    for name in scenes:
+        try:
+            load_reference(name)
+        except FileNotFoundError:
+            continue
+        for mode, target in (("uniform", None), ("adaptive", ADAPTIVE_TARGET)):
+            pts = convergence_ours(backend_name, name, max_spp, adaptive=target)
+            out.setdefault(name, {})[mode] = pts
+            renderer = f"pt-render {backend_name} {mode}"
+            for th in THRESHOLDS:
+                t = time_to_threshold([p[0] for p in pts], [p[2] for p in pts], th)
+                r.add("adaptive", name, renderer, "time_to_relMSE", "" if t is None else t,
+                      "s", "threshold", th)
+            for sec, spp, err in pts:
+                r.add("adaptive", name, renderer, "relMSE", err, "", "seconds", sec)
     return out
 
 
@@ -547,6 +575,18 @@ def summary(r, res, args):
                 cells.append("" if e is None else f"{e:.3g}" +
                              (f" ({e / base:.2f})" if base else ""))
             lines.append(f"| {scene} | {spp} | " + " | ".join(cells) + " |")
+    if res["adaptive"]:
+        lines += ["", f"## Adaptive sampling (stops a pixel at estimated relMSE "
+                      f"{ADAPTIVE_TARGET:g})", "",
+                  "| scene | time to 1e-2 uniform | adaptive | time to 1e-3 uniform | adaptive | "
+                  "ratio at 1e-3 |", "|---|---|---|---|---|---|"]
+        for scene, modes in res["adaptive"].items():
+            tt = {m: [time_to_threshold([p[0] for p in pts], [p[2] for p in pts], th)
+                      for th in THRESHOLDS] for m, pts in modes.items()}
+            u, a = tt["uniform"], tt["adaptive"]
+            ratio = f"{a[1] / u[1]:.2f}" if a[1] and u[1] else ""
+            lines.append(f"| {scene} | {_fmt_time(u[0])} | {_fmt_time(a[0])} | "
+                         f"{_fmt_time(u[1])} | {_fmt_time(a[1])} | {ratio} |")
     if res["denoise"]:
         lines += ["", "## Denoising (Open Image Denoise, CPU; biased)", "",
                   "relMSE against each scene's reference; the denoiser is guided by our albedo "
@@ -693,7 +733,7 @@ def main(argv=None):
         max_spp, tp, repeats, filt_res, mres = 1024, ((256, 256), 16), 7, (320, 240), ((96, 96), 4)
     t0 = time.perf_counter()
     want = set(args.sections)
-    res = {"convergence": ({}, {}), "samplers": {}, "denoise": {}, "throughput": {}, "filtering": {}, "blocks": {}, "bvh": [],
+    res = {"convergence": ({}, {}), "samplers": {}, "denoise": {}, "adaptive": {}, "throughput": {}, "filtering": {}, "blocks": {}, "bvh": [],
            "scaling": [], "compile": {}}
     if "convergence" in want:
         res["convergence"] = section_convergence(args.scenes, [b], peer, max_spp, r)
@@ -703,6 +743,9 @@ def main(argv=None):
         res["samplers"] = section_samplers(args.scenes[:1] if args.tiny else args.scenes, b,
                                            peer, spps,
                                            1 if args.tiny else 3 if args.quick else 4, r)
+    if "adaptive" in want:
+        res["adaptive"] = section_adaptive(args.scenes[:1] if args.tiny else args.scenes, b,
+                                           max_spp, r)
     if "denoise" in want:
         res["denoise"] = section_denoise(
             args.scenes[:1] if args.tiny else args.scenes, b, 2 if args.tiny else 16,

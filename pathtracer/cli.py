@@ -61,6 +61,17 @@ def _seconds(text):
     return v
 
 
+def _target(text):
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a relMSE such as 1e-3, got {text!r}") \
+            from None
+    if not (math.isfinite(v) and 0 < v < 1):
+        raise argparse.ArgumentTypeError(f"must be a number in (0, 1), got {text!r}")
+    return v
+
+
 def _resolution(text):
     try:
         w, h = (int(x, 10) for x in text.lower().split("x"))
@@ -102,6 +113,10 @@ def build_parser():
                    help="override the camera resolution")
     p.add_argument("--max-bounces", type=_integer(0, limits.MAX_BOUNCES),
                    help="override render.maxBounces")
+    p.add_argument("--adaptive", type=_target, metavar="RELMSE",
+                   help="adaptive sampling: a pixel stops taking samples once its estimated "
+                        "relMSE is below RELMSE (e.g. 1e-3; after 16 spp); the render ends "
+                        "when all have, or at --spp / --time")
     p.add_argument("--denoise", action="store_true",
                    help="denoise with Open Image Denoise (CPU), guided by albedo and normal "
                         "images: OUTPUT is the denoised image, OUTPUT_STEM-raw.EXT the raw one")
@@ -444,7 +459,8 @@ def _render(args, signals):
         progress.write(f"{'elapsed':>12} {'spp':>12}  relMSE")
     result = render(scene, backend, spp=spp, time_limit=args.time, seed=args.seed,
                     max_bounces=args.max_bounces, on_pass=on_pass,
-                    pass_seconds=0.25 if backend.name == "cuda" else 0.5)
+                    pass_seconds=0.25 if backend.name == "cuda" else 0.5,
+                    adaptive=args.adaptive)
     progress.close()
     film = result.film
     if film.spp == 0:
@@ -453,6 +469,11 @@ def _render(args, signals):
             return 128 + result.signal
         raise OutputError("no samples were rendered; no image written")
     written = saver.final(outputs(film.image()))
+    if args.adaptive:
+        done = float((film.count < film.spp).mean())
+        print(f"pt-render: adaptive: {film.count.mean():.1f} spp per pixel on average "
+              f"(min {film.count.min()}, max {film.count.max()}); {100 * done:.1f} % of the "
+              f"pixels stopped below relMSE {args.adaptive:g}", file=log)
     if denoise_seconds:
         print(f"pt-render: denoised {len(denoise_seconds)} time(s), the last in "
               f"{denoise_seconds[-1]:.2f} s (Open Image Denoise, CPU)", file=log)

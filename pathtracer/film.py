@@ -22,7 +22,11 @@ ALL_FORMATS = (".png",) + FLOAT_FORMATS
 
 @dataclass
 class Film:
-    """Sums of samples (float64) and ray statistics over the passes of a render."""
+    """Sums of samples (float64), samples per pixel and ray statistics over the passes of a
+    render. ``spp`` counts the samples of the passes; with adaptive sampling a finished
+    pixel takes no more, and ``count`` holds each pixel's own number. ``sum_b`` and
+    ``count_b``: the part of the sums from the second half of each adaptive pass, for the
+    per-pixel error estimate (:func:`pathtracer.render.error_estimate`)."""
     height: int
     width: int
     sum: np.ndarray = None
@@ -30,14 +34,26 @@ class Film:
     bounce_rays: int = 0
     shadow_rays: int = 0
     nonfinite: int = 0
+    count: np.ndarray = None
+    sum_b: np.ndarray = None
+    count_b: np.ndarray = None
 
     def __post_init__(self):
         self.sum = np.zeros((self.height, self.width, 3), np.float64)
+        self.count = np.zeros((self.height, self.width), np.int64)
 
-    def add(self, pass_sum, stats, n_samples):
+    def add(self, pass_sum, stats, n_samples, active=None, half_b=False):
         """Add one pass: float32 pixel sums over n_samples paths and its stats (layout
-        STAT_*)."""
+        STAT_*); ``active``: the pixels that took part (None: all); ``half_b``: the pass is
+        the second half of an adaptive pass."""
         self.sum += pass_sum
+        self.count += n_samples if active is None else n_samples * (active != 0)
+        if half_b:
+            if self.sum_b is None:
+                self.sum_b = np.zeros_like(self.sum)
+                self.count_b = np.zeros_like(self.count)
+            self.sum_b += pass_sum
+            self.count_b += n_samples if active is None else n_samples * (active != 0)
         self.spp += n_samples
         totals = stats.reshape(-1, STATS_WIDTH).sum(axis=0, dtype=np.int64)
         self.bounce_rays += int(totals[STAT_BOUNCE_RAYS])
@@ -46,11 +62,11 @@ class Film:
 
     def image(self):
         """The mean of the samples: linear radiance, float32 H x W x 3."""
-        return (self.sum / max(self.spp, 1)).astype(np.float32)
+        return (self.sum / np.maximum(self.count, 1)[..., None]).astype(np.float32)
 
     @property
     def camera_rays(self):
-        return self.spp * self.width * self.height
+        return int(self.count.sum())
 
 
 # ---------------------------------------------------------------------------------------

@@ -1,7 +1,10 @@
-"""Progressive rendering: passes of growing size accumulated into a float64 film."""
+"""Progressive rendering: passes of growing size accumulated into a float64 film, optionally
+with adaptive sampling."""
 import signal
 import time
 from dataclasses import dataclass, field
+
+import numpy as np
 
 from . import limits
 from .errors import Interrupted
@@ -18,8 +21,31 @@ class RenderResult:
     passes: list = field(default_factory=list)   # (elapsed s, spp) after each pass
 
 
+# Adaptive sampling: every pixel takes this many samples before its error is judged
+ADAPTIVE_MIN_SPP = 16
+RELMSE_EPS = 0.01       # the relMSE metric's denominator term (film.relmse)
+
+
+def error_estimate(film):
+    """Per pixel, the estimated relMSE of its mean: the two halves of every adaptive pass
+    are two independent estimates a and b of the pixel (each from half the samples), so
+    (a - b)^2 / 4 estimates the variance of their mean; divided by mean^2 + 0.01 as in the
+    relMSE metric, averaged over the channels, and then over each pixel's 3 x 3
+    neighbourhood (one pixel's estimate, from one difference, is too noisy to stop on:
+    Cycles' adaptive sampling filters it likewise)."""
+    count_b = np.maximum(film.count_b, 1)[..., None]
+    count_a = np.maximum(film.count - film.count_b, 1)[..., None]
+    b = film.sum_b / count_b
+    a = (film.sum - film.sum_b) / count_a
+    mean = film.sum / np.maximum(film.count, 1)[..., None]
+    q = ((a - b) ** 2 / 4 / (mean * mean + RELMSE_EPS)).mean(axis=2)
+    padded = np.pad(q, 1, mode="edge")
+    h, w = q.shape
+    return sum(padded[dy:dy + h, dx:dx + w] for dy in range(3) for dx in range(3)) / 9
+
+
 def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=None,
-           rr_depth=None, pass_seconds=0.5, on_pass=None):
+           rr_depth=None, pass_seconds=0.5, on_pass=None, adaptive=None):
     """Render ``scene`` with ``backend`` until ``spp`` samples per pixel or ``time_limit``
     seconds, whichever comes first (spp defaults to the scene's unless a time is given).
 
@@ -29,6 +55,13 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
     stops the render and returns the samples of the passes completed (``interrupted`` and
     ``signal`` are set). A render never exceeds ``limits.MAX_SPP`` samples per pixel (the
     random streams are indexed by 32-bit sample numbers).
+
+    ``adaptive`` (a target relMSE): adaptive sampling. Every pass is rendered in two halves
+    (kept apart for :func:`error_estimate`); after ADAPTIVE_MIN_SPP samples a pixel whose
+    estimated relMSE is below the target takes no more samples, and the render ends when
+    every pixel has (or at ``spp`` / ``time_limit``). Each pixel is the plain mean of its
+    own samples (nothing clamped); stopping on a noisy estimate of the error is the only
+    source of bias, as in every adaptive sampler.
     """
     seed = scene.seed if seed is None else seed
     max_bounces = scene.max_bounces if max_bounces is None else max_bounces
@@ -40,7 +73,8 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
     backend.compile()
     compile_seconds = time.perf_counter() - t0
     result = RenderResult(film, 0.0, compile_seconds)
-    n = 1
+    n = 2 if adaptive else 1
+    active = None
     start = time.perf_counter()
     try:
         while True:
@@ -53,13 +87,31 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
             if spp is not None:
                 n = min(n, spp - film.spp)
             t_pass = time.perf_counter()
-            pass_sum, stats = backend.render_pass(film.spp, n, seed, max_bounces, rr_depth)
-            film.add(pass_sum, stats, n)
+            if adaptive and n >= 2:
+                half = n // 2
+                n = 2 * half
+                first = film.spp
+                for k in range(2):
+                    pass_sum, stats = backend.render_pass(first + k * half, half, seed,
+                                                          max_bounces, rr_depth, active)
+                    film.add(pass_sum, stats, half, active, half_b=k == 1)
+            elif active is not None:
+                pass_sum, stats = backend.render_pass(film.spp, n, seed, max_bounces, rr_depth,
+                                                      active)
+                film.add(pass_sum, stats, n, active)
+            else:
+                pass_sum, stats = backend.render_pass(film.spp, n, seed, max_bounces, rr_depth)
+                film.add(pass_sum, stats, n)
             dt = time.perf_counter() - t_pass
             elapsed = time.perf_counter() - start
             result.passes.append((elapsed, film.spp))
+            if adaptive and film.spp >= ADAPTIVE_MIN_SPP:
+                going = error_estimate(film) > adaptive
+                active = (going if active is None else going & (active != 0)).astype(np.uint8)
             if on_pass is not None:
                 on_pass(film, elapsed)
+            if active is not None and not active.any():
+                break
             # Grow the pass while it is short; aim the last pass at the time limit.
             if dt < pass_seconds:
                 n *= 2

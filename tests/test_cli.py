@@ -144,3 +144,13 @@ def test_sampler_option(tmp_path, small_scene):
     assert abs(imgs["sobol"].mean() - imgs["independent"].mean()) < 0.02
     r = pt_render(small_scene, "--sampler", "halton")
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_adaptive_option(tmp_path, small_scene):
+    out = tmp_path / "a.npy"
+    r = pt_render(small_scene, "-o", out, "--spp", 64, "--adaptive", "1e-2", "--quiet")
+    assert r.returncode == 0, r.stderr
+    assert "adaptive:" in r.stderr and np.isfinite(np.load(out)).all()
+    for bad in ("0", "2", "nan", "x"):
+        r = pt_render(small_scene, "--adaptive", bad)
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, bad

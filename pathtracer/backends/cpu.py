@@ -17,12 +17,18 @@ def pass_kernel(features):
 
     # error_model='numpy': float division by zero gives inf/nan as on the GPU, not an exception.
     @njit(parallel=True, cache=jit_cache(), error_model="numpy")
-    def render_pass(out, stats, sample_start, n_samples, seed, max_bounces, rr_depth, scene):
+    def render_pass(out, stats, sample_start, n_samples, seed, max_bounces, rr_depth, scene,
+                    active):
         for py in prange(out.shape[0]):
             stack = np.empty(STACK_SIZE, np.int32)   # BVH traversal scratch, one per row
             for px in range(out.shape[1]):
-                render_pixel(px, py, sample_start, n_samples, seed, max_bounces, rr_depth,
-                             scene, stack, out, stats)
+                if active[py, px]:
+                    render_pixel(px, py, sample_start, n_samples, seed, max_bounces,
+                                 rr_depth, scene, stack, out, stats)
+                else:                                # adaptive sampling: a finished pixel
+                    for c in range(out.shape[2]):
+                        out[py, px, c] = 0.0
+                        stats[py, px, c] = 0
 
     return render_pass
 
@@ -49,6 +55,7 @@ class CPUBackend:
         self.kernel = pass_kernel(scene.features)
         self.out = np.zeros((scene.height, scene.width, 3), np.float32)
         self.stats = np.zeros((scene.height, scene.width, 3), np.int32)
+        self.all_pixels = np.ones((scene.height, scene.width), np.uint8)
 
     def compile(self):
         """Compile (or load from the disk cache) without rendering."""
@@ -60,8 +67,9 @@ class CPUBackend:
         aov_kernel(self.scene.features)(out, n_samples, seed, self.scene.arrays)
         return out
 
-    def render_pass(self, sample_start, n_samples, seed, max_bounces, rr_depth):
-        """Sums over n_samples paths per pixel (float32 HxWx3) and ray/NaN counts (HxWx3)."""
+    def render_pass(self, sample_start, n_samples, seed, max_bounces, rr_depth, active=None):
+        """Sums over n_samples paths per pixel (float32 HxWx3) and ray/NaN counts (HxWx3);
+        ``active`` (uint8 HxW, adaptive sampling): only the pixels where it is not 0."""
         self.kernel(self.out, self.stats, sample_start, n_samples, seed, max_bounces, rr_depth,
-                    self.scene.arrays)
+                    self.scene.arrays, self.all_pixels if active is None else active)
         return self.out, self.stats

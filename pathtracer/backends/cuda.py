@@ -51,20 +51,26 @@ def pass_kernel(features, max_registers=None, fast=False):
                                                     fastmath=fastmath)
 
     @cuda.jit(cache=jit_cache(), **options)
-    def render_pass(out, stats, sample_start, n_samples, seed, max_bounces, rr_depth, scene):
+    def render_pass(out, stats, sample_start, n_samples, seed, max_bounces, rr_depth, scene,
+                    active):
         """Group g = blockIdx.z renders its share of samples [sample_start, + n_samples)
-        into out[g], stats[g]."""
+        into out[g], stats[g] (pixels where active is 0: zeros)."""
         if options_key < 0:     # never: makes the options part of the cache key
             return
         px, py = cuda.grid(2)
         g = cuda.blockIdx.z
         groups = cuda.gridDim.z
         if px < out.shape[2] and py < out.shape[1]:
-            lo = (n_samples * g) // groups
-            hi = (n_samples * (g + 1)) // groups
-            stack = cuda.local.array(STACK_SIZE, np.int32)
-            render_pixel(px, py, sample_start + lo, hi - lo, seed, max_bounces, rr_depth,
-                         scene, stack, out[g], stats[g])
+            if active[py, px]:
+                lo = (n_samples * g) // groups
+                hi = (n_samples * (g + 1)) // groups
+                stack = cuda.local.array(STACK_SIZE, np.int32)
+                render_pixel(px, py, sample_start + lo, hi - lo, seed, max_bounces, rr_depth,
+                             scene, stack, out[g], stats[g])
+            else:
+                for c in range(3):
+                    out[g, py, px, c] = 0.0
+                    stats[g, py, px, c] = 0
 
     return render_pass
 
@@ -119,6 +125,7 @@ class CUDABackend:
         self.d_out = cuda.device_array((h, w, 3), np.float32)
         self.d_stats = cuda.device_array((h, w, 3), np.int32)
         self._parts = None   # scratch film (float sums, ray counts), see _scratch
+        self.d_all_pixels = cuda.to_device(np.ones((h, w), np.uint8))
         self.out = cuda.pinned_array((h, w, 3), np.float32)
         self.stats = cuda.pinned_array((h, w, 3), np.int32)
         self.grid = ((w + self.block[0] - 1) // self.block[0],
@@ -144,20 +151,21 @@ class CUDABackend:
                            cuda.device_array((groups, h, w, 3), np.int32))
         return self._parts[0][:groups], self._parts[1][:groups]
 
-    def launch(self, sample_start, n_samples, seed, max_bounces, rr_depth):
+    def launch(self, sample_start, n_samples, seed, max_bounces, rr_depth, active=None):
         """Start a pass without waiting (for timing the kernel alone)."""
+        d_active = self.d_all_pixels if active is None else cuda.to_device(active)
         groups = sample_groups(self.scene.width, self.scene.height, n_samples,
                                self.target_threads)
         parts, part_stats = self._scratch(groups)
         self.kernel[self.grid + (groups,), self.block](
             parts, part_stats, sample_start, n_samples, seed, max_bounces, rr_depth,
-            self.d_scene)
+            self.d_scene, d_active)
         if groups > 1:
             sum_groups[self.grid, self.block](parts, part_stats, groups, self.d_out,
                                               self.d_stats)
 
-    def render_pass(self, sample_start, n_samples, seed, max_bounces, rr_depth):
-        self.launch(sample_start, n_samples, seed, max_bounces, rr_depth)
+    def render_pass(self, sample_start, n_samples, seed, max_bounces, rr_depth, active=None):
+        self.launch(sample_start, n_samples, seed, max_bounces, rr_depth, active)
         self.d_out.copy_to_host(self.out)
         self.d_stats.copy_to_host(self.stats)
         return self.out, self.stats

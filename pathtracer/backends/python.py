@@ -20,12 +20,16 @@ class PythonBackend:
     def compile(self):
         pass
 
-    def render_pass(self, sample_start, n_samples, seed, max_bounces, rr_depth):
+    def render_pass(self, sample_start, n_samples, seed, max_bounces, rr_depth, active=None):
         stack = np.empty(STACK_SIZE, np.int32)
         pixels = self.pixels or [(x, y) for y in range(self.scene.height)
                                  for x in range(self.scene.width)]
+        self.out[:] = 0
+        self.stats[:] = 0
         with np.errstate(all="ignore"):
             for px, py in pixels:
+                if active is not None and not active[py, px]:
+                    continue
                 self.render_pixel(px, py, sample_start, n_samples, seed, max_bounces, rr_depth,
                                   self.scene.arrays, stack, self.out, self.stats)
         return self.out, self.stats
