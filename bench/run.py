@@ -91,16 +91,11 @@ def convergence_mitsuba(variant, name, max_spp):
     import drjit as dr
     import mitsuba as mi
 
-    from bench.common import mitsuba_cornell
-    from pathtracer.mitsuba import NotExpressible, mitsuba_dict
     mi.set_variant(variant)
-    try:
-        ref, _ = load_reference(name, mitsuba=True)
-        scene = (mitsuba_cornell(ref.shape[1], ref.shape[0], 1) if name == "cornell-box" else
-                 mi.load_dict(mitsuba_dict(convergence_desc(name))))
-    except (FileNotFoundError, NotExpressible) as e:
-        print(f"bench: no Mitsuba curve for {name}: {e}", file=sys.stderr)
+    got = _mitsuba_scene(name, "independent")
+    if got is None:
         return None
+    scene, ref = got
     points = []
     spp = 1
     dr.eval(mi.render(scene, spp=1, seed=99))    # warm-up (kernel compilation)
@@ -214,7 +209,7 @@ def _mitsuba_scene(name, sampler):
                  if name == "cornell-box" else
                  mi.load_dict(mitsuba_dict(convergence_desc(name), sampler=sampler)))
     except (FileNotFoundError, NotExpressible) as e:
-        print(f"bench: no Mitsuba samplers for {name}: {e}", file=sys.stderr)
+        print(f"bench: no Mitsuba renders of {name}: {e}", file=sys.stderr)
         return None
     return scene, ref
 

@@ -57,11 +57,10 @@ def env_uv(env_info, d):
 
 
 @device
-def env_eval(env_img, env_info, d):
-    """Radiance arriving from direction d (bilinear)."""
-    h = env_img.shape[0]
-    w = env_img.shape[1]
-    u, v, _ = env_uv(env_info, d)
+def env_cell(w, h, u, v):
+    """The four texels (columns i0, i1, rows j0, j1) around (u, v) of a W x H map, wrapping
+    in u and clamping in v, and the fractions (fx, fy) between them: the one bilinear
+    lookup of the radiance (env_eval) and of the density (env_pdf)."""
     # float32 sizes: int * float32 would promote to float64
     ix, iy, fx, fy = bilinear_cell(u * np.float32(w), v * np.float32(h))
     i0 = ix % w
@@ -70,8 +69,16 @@ def env_eval(env_img, env_info, d):
     i1 = i0 + 1
     if i1 >= w:
         i1 = 0
-    j0 = min(max(iy, 0), h - 1)
-    j1 = min(max(iy + 1, 0), h - 1)
+    return i0, i1, min(max(iy, 0), h - 1), min(max(iy + 1, 0), h - 1), fx, fy
+
+
+@device
+def env_eval(env_img, env_info, d):
+    """Radiance arriving from direction d (bilinear)."""
+    h = env_img.shape[0]
+    w = env_img.shape[1]
+    u, v, _ = env_uv(env_info, d)
+    i0, i1, j0, j1, fx, fy = env_cell(w, h, u, v)
     return bilinear_blend(
         (env_img[j0, i0, 0], env_img[j0, i0, 1], env_img[j0, i0, 2]),
         (env_img[j0, i1, 0], env_img[j0, i1, 1], env_img[j0, i1, 2]),
@@ -89,15 +96,7 @@ def env_pdf(env_pdf_arr, env_info, d):
     sin_t = math.sqrt(max(ONE - y * y, ZERO))
     if sin_t <= ZERO:
         return ZERO
-    ix, iy, fx, fy = bilinear_cell(u * np.float32(w), v * np.float32(h))
-    i0 = ix % w
-    if i0 < 0:
-        i0 += w
-    i1 = i0 + 1
-    if i1 >= w:
-        i1 = 0
-    j0 = min(max(iy, 0), h - 1)
-    j1 = min(max(iy + 1, 0), h - 1)
+    i0, i1, j0, j1, fx, fy = env_cell(w, h, u, v)
     a = env_pdf_arr[j0, i0] + fx * (env_pdf_arr[j0, i1] - env_pdf_arr[j0, i0])
     b = env_pdf_arr[j1, i0] + fx * (env_pdf_arr[j1, i1] - env_pdf_arr[j1, i0])
     return (a + fy * (b - a)) / (TWO_PI_SQ * sin_t)
