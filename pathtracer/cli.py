@@ -154,6 +154,8 @@ class StopSignals:
         self.previous = {}
         self.defer = 0
         self.pending = None
+        self.raised = None        # the last signal raised as Interrupted (see check)
+        self.unraisable_hook = None
 
     def __enter__(self):
         for s in STOP_SIGNALS:
@@ -161,17 +163,34 @@ class StopSignals:
                 self.previous[s] = signal.signal(s, self._handler)
             except ValueError:       # not the main thread: leave the handlers alone
                 break
+        self.unraisable_hook = sys.unraisablehook
+        sys.unraisablehook = self._unraisable
         return self
 
     def __exit__(self, *exc):
         for s, h in self.previous.items():
             signal.signal(s, h)
+        sys.unraisablehook = self.unraisable_hook
         return False
 
     def _handler(self, signum, frame):
         if self.defer:
             self.pending = self.pending or signum
         else:
+            self.raised = signum
+            raise Interrupted(signum)
+
+    def _unraisable(self, info):
+        """A signal that arrives while Python runs a finaliser (Numba's compiler disposes
+        of LLVM objects in __del__) raises there, where Python swallows the exception and
+        prints it: keep it quiet; check() raises it again."""
+        if not isinstance(info.exc_value, Interrupted):
+            self.unraisable_hook(info)
+
+    def check(self):
+        """Raise a stop signal that was raised inside a finaliser and swallowed there."""
+        if self.raised:
+            signum, self.raised = self.raised, None
             raise Interrupted(signum)
 
     @contextlib.contextmanager
@@ -410,6 +429,7 @@ def _render(args, signals):
     if not args.quiet:
         print("pt-render: compiling kernels (cached on disk after the first run)...", file=log)
     backend.compile()
+    signals.check()
     compile_seconds = time.perf_counter() - t0
     if not args.quiet:
         print(f"pt-render: kernels ready in {compile_seconds:.2f} s", file=log)
@@ -418,6 +438,7 @@ def _render(args, signals):
         from .denoise import AOV_SPP
         t_aov = time.perf_counter()
         aovs = backend.aovs(AOV_SPP, scene.seed if args.seed is None else args.seed)
+        signals.check()
         if not args.quiet:
             print(f"pt-render: albedo and normal images ({AOV_SPP} spp) in "
                   f"{time.perf_counter() - t_aov:.2f} s", file=log)
@@ -446,6 +467,7 @@ def _render(args, signals):
     next_write = [1.0]
 
     def on_pass(film, elapsed):
+        signals.check()
         progress.update(film.spp, elapsed)
         if reference is not None:
             err = relmse(film.image(), reference)
