@@ -37,6 +37,10 @@ SHADOW_SHORTEN = F32(1.0 - 2.0 ** -16)
 # 1/0 replacement in reciprocal ray directions: big but finite, so that 0 * it is 0, not NaN.
 BIG = F32(1e30)
 
+# A shading normal that would put wo below its horizon is bent towards wo until wo is this
+# far (cosine) above it: a lit surface must not turn black where a normal leans away.
+HORIZON_EPS = F32(1e-3)
+
 # Russian roulette never continues with more than this probability (as Mitsuba's `path`).
 RR_MAX = F32(0.95)
 

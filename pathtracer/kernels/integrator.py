@@ -38,7 +38,8 @@ from .rng import make_sampler
 from .scatter import make_scatter
 from .surface import make_surface
 from .traverse import any_hit, closest_hit
-from .vec import add, cross, dot, load3, madd, max_comp, mul, neg, normalize, scale
+from .vec import (add, cross, dot, load3, madd, max_comp, mul, neg, normalize, scale,
+                  to_world)
 from .warps import power_heuristic
 
 __all__ = ["Features", "SceneArrays", "make_render_pixel"]
@@ -81,8 +82,9 @@ def make_kernels(features, target="cpu"):
     emitters = make_emitters(features, target)
     tri_uv_at, material_at, shading_frame, ray_origin = (
         surface.tri_uv_at, surface.material_at, surface.shading_frame, surface.ray_origin)
-    local_wo, eval_world, sample_world, leave = (
-        scatter.local_wo, scatter.eval_world, scatter.sample_world, scatter.leave)
+    local_wo, eval_world, sample_world, leave, side_normal, own_skip = (
+        scatter.local_wo, scatter.eval_world, scatter.sample_world, scatter.leave,
+        scatter.side_normal, scatter.own_skip)
     sample_emitter, environment_radiance, hit_emission, escaped = (
         emitters.sample_emitter, emitters.environment_radiance, emitters.hit_emission,
         emitters.escaped)
@@ -115,17 +117,18 @@ def make_kernels(features, target="cpu"):
         return beta, True
 
     @step
-    def direct_light(beta, is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, p,
-                     origin, tri, wi, t_max, le, pdf_light, is_delta, light_tri, tri_v,
+    def direct_light(beta, is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, wp,
+                     ng_tri, p, origin, tri, wi, t_max, le, pdf_light, is_delta, light_tri, tri_v,
                      bvh_box, bvh_child, env_img, env_info, stack):
         """The one shadow-ray-and-MIS tail of next-event estimation, for every emitter
-        kind (a sample_emitter record): (radiance added, shadow rays traced)."""
+        kind (a sample_emitter record): (radiance added, shadow rays traced). ng: the
+        side normal (see side_normal), ng_tri: the triangle's."""
         f, pdf_bsdf = eval_world(is_principled, params, wo, wo_l, wi, tangent, bitangent, ns,
-                                 ng)
+                                 ng, wp)
         if not (max_comp(f) > ZERO):
             return (ZERO, ZERO, ZERO), 0
-        if any_hit(leave(p, ng, wi, origin), wi, t_max, tri, light_tri, tri_v, bvh_box,
-                   bvh_child, stack):
+        if any_hit(leave(p, ng, wi, origin), wi, t_max, own_skip(tri, ng_tri, ng, wi),
+                   light_tri, tri_v, bvh_box, bvh_child, stack):
             return (ZERO, ZERO, ZERO), 1
         le = environment_radiance(env_img, env_info, wi, le, is_delta, light_tri)
         if is_delta:
@@ -177,11 +180,13 @@ def make_kernels(features, target="cpu"):
                 break
             is_principled, params = material_at(scene.mat, scene.mat_tex, scene.tex_data,
                                                 scene.tex_int, scene.tex_f, m, tu, tv)
-            ng, ns, tangent, bitangent = shading_frame(
+            ng, ns, tangent, bitangent, wp = shading_frame(
                 scene.tri_n, scene.tri_t, scene.mat_tex, scene.tex_data, scene.tex_int,
                 scene.tex_f, tri, m, b1, b2, e1, ng, wo, params[P_TRANSMISSION] > ZERO, tu, tv)
             wo_l = local_wo(wo, tangent, bitangent, ns)
             origin = ray_origin(scene.tri_n, tri, p, b1, b2, v0, e1, e2, ng)
+            ng_tri = ng
+            ng = side_normal(ng, ns, wp)
             dim = D_FIRST_BOUNCE + bounce * DIMS_PER_BOUNCE
             # ---- next-event estimation: one emitter sample, one shadow ray ----
             if NEE:
@@ -191,8 +196,8 @@ def make_kernels(features, target="cpu"):
                     draw(state, dims, dim + D_LIGHT_U), draw(state, dims, dim + D_LIGHT_V))
                 if pdf_light > ZERO:
                     contribution, traced = direct_light(
-                        beta, is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, p,
-                        origin, tri, wi, t_max, le, pdf_light, is_delta, light_tri,
+                        beta, is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, wp,
+                        ng_tri, p, origin, tri, wi, t_max, le, pdf_light, is_delta, light_tri,
                         scene.tri_v, scene.bvh_box, scene.bvh_child, scene.env_img,
                         scene.env_info, stack)
                     radiance = add(radiance, contribution)
@@ -200,7 +205,7 @@ def make_kernels(features, target="cpu"):
             # ---- BSDF sampling: the next ray ----
             dims = open_set(state, dim + D_BSDF_U)
             wi, weight, pdf_bsdf = sample_world(
-                is_principled, params, wo, wo_l, tangent, bitangent, ns, ng,
+                is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, wp,
                 draw(state, dims, dim + D_BSDF_LOBE), draw(state, dims, dim + D_BSDF_U),
                 draw(state, dims, dim + D_BSDF_V))
             if not (pdf_bsdf > ZERO):
@@ -209,7 +214,7 @@ def make_kernels(features, target="cpu"):
             pdf_prev = pdf_bsdf
             o = leave(p, ng, wi, origin)
             d = wi
-            skip = tri
+            skip = own_skip(tri, ng_tri, ng, wi)
             bounce += 1
             n_bounce_rays += 1
             beta, alive = russian_roulette(beta, bounce, rr_depth, state, dim)
@@ -295,30 +300,32 @@ def make_kernels(features, target="cpu"):
                 tu, tv = tri_uv_at(scene.tri_uv, tri, b1, b2)
                 is_principled, params = material_at(scene.mat, scene.mat_tex, scene.tex_data,
                                                     scene.tex_int, scene.tex_f, m, tu, tv)
-                ng, ns, tangent, bitangent = shading_frame(
+                ng, ns, tangent, bitangent, wp = shading_frame(
                     scene.tri_n, scene.tri_t, scene.mat_tex, scene.tex_data, scene.tex_int,
                     scene.tex_f, tri, m, b1, b2, e1, ng, wo, params[P_TRANSMISSION] > ZERO,
                     tu, tv)
                 albedo = (min(params[P_BASE], ONE), min(params[P_BASE + 1], ONE),
                           min(params[P_BASE + 2], ONE))
-                normal = ns
+                normal = to_world(wp, tangent, bitangent, ns)
                 specular = is_principled and params[P_ROUGHNESS] < AOV_SPECULAR_ROUGHNESS and (
                     params[P_METALLIC] > HALF_F or params[P_TRANSMISSION] > HALF_F)
                 if not specular or bounce == AOV_MAX_SPECULAR:
                     break
                 wo_l = local_wo(wo, tangent, bitangent, ns)
                 origin = ray_origin(scene.tri_n, tri, p, b1, b2, v0, e1, e2, ng)
+                ng_tri = ng
+                ng = side_normal(ng, ns, wp)
                 dim = D_FIRST_BOUNCE + bounce * DIMS_PER_BOUNCE
                 dims = open_set(state, dim + D_BSDF_U)
                 wi, weight, pdf_bsdf = sample_world(
-                    is_principled, params, wo, wo_l, tangent, bitangent, ns, ng,
+                    is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, wp,
                     draw(state, dims, dim + D_BSDF_LOBE), draw(state, dims, dim + D_BSDF_U),
                     draw(state, dims, dim + D_BSDF_V))
                 if not (pdf_bsdf > ZERO):
                     break
                 o = leave(p, ng, wi, origin)
                 d = wi
-                skip = tri
+                skip = own_skip(tri, ng_tri, ng, wi)
             acc = add(acc, albedo)
             nacc = add(nacc, normal)
         inv = ONE / np.float32(max(n_samples, 1))

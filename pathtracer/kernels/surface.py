@@ -10,7 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .constants import ONE, OFFSET_REL, TWO, ZERO
+from .constants import HORIZON_EPS, ONE, OFFSET_REL, TWO, ZERO
 from .device import device, step_marker
 from .layout import (M_ALBEDO, M_ANISOTROPIC, M_CLEARCOAT, M_CLEARCOAT_GLOSS, M_EMISSION,
                      M_ETA, M_METALLIC, M_ROUGHNESS, M_SHEEN, M_SHEEN_TINT, M_SPEC_TINT,
@@ -20,13 +20,13 @@ from .layout import (M_ALBEDO, M_ANISOTROPIC, M_CLEARCOAT, M_CLEARCOAT_GLOSS, M_
                      T_SHEEN_TINT, T_SPEC_TINT, T_SPECULAR, T_SUBSURFACE, T_TRANSMISSION,
                      TRI_N0, TRI_N1, TRI_N2, TRI_T0, TRI_T1, TRI_T2, TRI_T_SIGN, TRI_UV0,
                      TRI_UV1, TRI_UV2, specialise)
+from .normalmap import clamp_mapped_normal, mapped_normal_seeing
 from .textures import tex_lookup
 from .vec import (add, cross, dot, frame, load3, luminance, madd, max_abs, neg, normalize,
                   scale)
 
 ETA_MIN_TRANSMISSIVE = np.float32(1.001)   # eta = 1 is no interface (as Mitsuba)
 SPEC_K = np.float32(0.08)                  # F0 = SPEC_K * specular (Burley 2012)
-HORIZON_EPS = np.float32(1e-3)
 
 
 @device
@@ -185,10 +185,9 @@ def make_surface(features, target="cpu"):
 
     @step
     def mapped_normal(mat_tex, tex_data, tex_int, tex_f, tri_t, tri, m, u, v, ns, tangent):
-        """The normal-mapped shading normal (OpenGL convention: +Y, green, along the
-        bitangent n x t times the handedness of the UV mapping), its tangent, and whether
-        that tangent is usable; ns and tangent unchanged where there is no normal map."""
-        has_tangent = True
+        """The world-space normal of material m's normal map at (u, v) (OpenGL convention:
+        +Y, green, along the bitangent n x t times the handedness of the UV mapping), in the
+        frame of the smooth normal ns and its tangent; ns where there is no normal map."""
         tn = mat_tex[m, T_NORMAL]
         if tn >= 0:
             c = tex_lookup(tex_data, tex_int, tex_f, tn, u, v)
@@ -196,23 +195,21 @@ def make_surface(features, target="cpu"):
             nm = add(add(scale(tangent, TWO * c[0] - ONE), scale(bt, TWO * c[1] - ONE)),
                      scale(ns, TWO * c[2] - ONE))
             if dot(nm, nm) > ZERO:
-                ns = normalize(nm)
-                tangent = madd(tangent, ns, -dot(tangent, ns))
-                if dot(tangent, tangent) > ZERO:
-                    tangent = normalize(tangent)
-                else:
-                    has_tangent = False
-        return ns, tangent, has_tangent
+                return normalize(nm)
+        return ns
 
     @step
     def shading_frame(tri_n, tri_t, mat_tex, tex_data, tex_int, tex_f, tri, m, b1, b2, e1,
                       ng, wo, transmissive, u, v):
-        """(ng, ns, tangent, bitangent): the geometric normal and the orthonormal shading
-        frame, both turned to wo's side unless the material is transmissive (an interface
+        """(ng, ns, tangent, bitangent, wp): the geometric normal, the orthonormal shading
+        frame and the normal-mapped normal wp in that frame ((0, 0, 1) without a normal
+        map), all turned to wo's side unless the material is transmissive (an interface
         with an inside keeps the geometric front side; anything else reflects on both
-        sides). The shading normal is interpolated (smooth meshes) and normal-mapped; one
-        that would put wo below its horizon is bent towards wo just enough to see it, or a
-        lit surface would turn black."""
+        sides). The frame's normal is the interpolated one (smooth meshes), never the
+        mapped one: normal-mapped lobes are folded across the smooth surface (see
+        .normalmap), so that shading does not depend on the triangle. A normal that would
+        put wo below its horizon is bent towards wo just enough to see it, or a lit
+        surface would turn black."""
         side = ONE
         if dot(ng, wo) < ZERO and not transmissive:
             side = -ONE
@@ -230,13 +227,15 @@ def make_surface(features, target="cpu"):
             if dot(tt, tt) > ZERO:
                 tangent = normalize(tt)
                 has_tangent = True
+        nm = ns
         if NORMAL_MAP:
             if has_tangent:
-                ns, tangent, has_tangent = mapped_normal(mat_tex, tex_data, tex_int, tex_f,
-                                                         tri_t, tri, m, u, v, ns, tangent)
+                nm = mapped_normal(mat_tex, tex_data, tex_int, tex_f, tri_t, tri, m, u, v, ns,
+                                   tangent)
         if side < ZERO:
             ng = neg(ng)
             ns = neg(ns)
+            nm = neg(nm)
         s_o = ONE if dot(ng, wo) >= ZERO else -ONE
         c_o = dot(ns, wo) * s_o
         if c_o < HORIZON_EPS:
@@ -252,7 +251,13 @@ def make_surface(features, target="cpu"):
             tangent, bitangent = frame(ns)   # isotropic BSDFs only: any tangent will do
         if PRINCIPLED or TANGENTS:
             bitangent = cross(ns, tangent)
-        return ng, ns, tangent, bitangent
+        wp = (ZERO, ZERO, ONE)
+        if NORMAL_MAP:
+            if has_tangent:
+                wp = clamp_mapped_normal((dot(nm, tangent), dot(nm, bitangent), dot(nm, ns)))
+                wp = mapped_normal_seeing(wp, (dot(wo, tangent), dot(wo, bitangent),
+                                               dot(wo, ns)))
+        return ng, ns, tangent, bitangent, wp
 
     @step
     def ray_origin(tri_n, tri, p, b1, b2, v0, e1, e2, ng):
