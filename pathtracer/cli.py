@@ -20,7 +20,7 @@ from .errors import (EXIT_INPUT, EXIT_INTERNAL, EXIT_IO, EXIT_OK, InputError, In
                      OutputError)
 from .film import ALL_FORMATS, read_image, relmse, write_images
 from .scene import SceneError
-from .scene.loader import SAMPLERS
+from .scene.loader import SAMPLERS, TONEMAPS
 
 STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP")
                      if hasattr(signal, n))
@@ -69,6 +69,18 @@ def _target(text):
             from None
     if not (math.isfinite(v) and 0 < v < 1):
         raise argparse.ArgumentTypeError(f"must be a number in (0, 1), got {text!r}")
+    return v
+
+
+def _exposure(text):
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of stops (EV), got {text!r}") \
+            from None
+    if not (math.isfinite(v) and abs(v) <= limits.MAX_EXPOSURE):
+        raise argparse.ArgumentTypeError(f"must be a number in [-{limits.MAX_EXPOSURE:g}, "
+                                         f"{limits.MAX_EXPOSURE:g}], got {text!r}")
     return v
 
 
@@ -126,6 +138,12 @@ def build_parser():
     p.add_argument("--sampler", choices=SAMPLERS,
                    help="sobol (Owen-scrambled, low discrepancy) or independent; "
                         "default: the scene's render.sampler (sobol)")
+    p.add_argument("--exposure", type=_exposure, metavar="EV",
+                   help="exposure of the PNG in stops (x 2^EV before the tone curve); "
+                        "default: the scene's render.exposure (0). EXR/HDR/NPY stay linear")
+    p.add_argument("--tonemap", choices=TONEMAPS,
+                   help="tone curve of the PNG: clamp (none), aces (Narkowicz's ACES fit) or "
+                        "agx (Blender's AgX); default: the scene's render.tonemap (clamp)")
     p.add_argument("--reference", metavar="IMAGE",
                    help="reference image (.npy, .hdr, .exr): print elapsed s, spp and relMSE "
                         "after each pass and write them as CSV (see --reference-csv)")
@@ -247,16 +265,17 @@ class Saver:
     fails warns and is retried at the next refresh; the final save falls back to another
     folder and says where."""
 
-    def __init__(self, targets, signals, warn):
+    def __init__(self, targets, signals, warn, display=None):
         self.targets = targets
         self.signals = signals
         self.warn = warn
+        self.display = display       # (exposure, tone curve) of 8-bit files
         self.last_error = None
 
     def periodic(self, image):
         try:
             with self.signals.deferred():
-                write_images(self.targets, image)
+                write_images(self.targets, image, self.display)
             self.last_error = None
         except OSError as e:
             message = f"could not save {self.targets[0]} ({e.strerror or e})"
@@ -268,14 +287,14 @@ class Saver:
         """The targets written, or raises OutputError after saving elsewhere if it can."""
         with self.signals.deferred(raise_after=False):
             try:
-                write_images(self.targets, image)
+                write_images(self.targets, image, self.display)
                 return self.targets
             except OSError as e:
                 first = e
             tried = []
             for alt in _fallback_targets(self.targets):
                 try:
-                    write_images(alt, image)
+                    write_images(alt, image, self.display)
                 except OSError:
                     tried.append(os.path.dirname(alt[0]))
                     continue
@@ -387,6 +406,10 @@ def _render(args, signals):
         desc.camera.resolution = args.resolution
     if args.sampler:
         desc.render.sampler = args.sampler
+    if args.exposure is not None:
+        desc.render.exposure = args.exposure
+    if args.tonemap:
+        desc.render.tonemap = args.tonemap
     check_film(*desc.camera.resolution, args.backend)
     scene = compile_scene(desc)
     load_seconds = time.perf_counter() - t0
@@ -444,7 +467,8 @@ def _render(args, signals):
                   f"{time.perf_counter() - t_aov:.2f} s", file=log)
     progress = Progress(spp, args.time, scene.width * scene.height, quiet=args.quiet,
                         stream=log)
-    saver = Saver(targets, signals, lambda m: progress.write(f"pt-render: warning: {m}"))
+    saver = Saver(targets, signals, lambda m: progress.write(f"pt-render: warning: {m}"),
+                  (desc.render.exposure, desc.render.tonemap))
     denoise_seconds = []
 
     def outputs(image):

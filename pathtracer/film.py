@@ -91,20 +91,26 @@ def linear_to_srgb(x):
     return out.reshape(x.shape)
 
 
-def to_display(image):
-    """8-bit sRGB display values of linear radiance (clamped to [0, 1]: no tone curve)."""
+def to_display(image, display=None):
+    """8-bit sRGB display values of linear radiance; ``display``: (exposure EV, tone
+    curve) (see pathtracer.tonemap; default: no exposure, values clamped to [0, 1])."""
+    if display is not None and tuple(display) != (0.0, "clamp"):
+        from .tonemap import display_linear
+        image = display_linear(image, *display)
     return np.round(linear_to_srgb(image) * 255.0).astype(np.uint8)
 
 
 # ---------------------------------------------------------------------------------------
 # Files
 
-def encode(image, ext):
-    """Bytes of ``image`` (float HxWx3, linear RGB) in the format of extension ``ext``."""
+def encode(image, ext, display=None):
+    """Bytes of ``image`` (float HxWx3, linear RGB) in the format of extension ``ext``;
+    ``display`` (exposure, tone curve) applies to 8-bit formats only: float formats keep
+    the linear values."""
     ext = ext.lower()
     if ext == ".png":
         import imageio.v3 as iio
-        return iio.imwrite("<bytes>", to_display(image), extension=".png")
+        return iio.imwrite("<bytes>", to_display(image, display), extension=".png")
     if ext == ".hdr":
         import imagecodecs
         return imagecodecs.rgbe_encode(np.ascontiguousarray(image, np.float32))
@@ -126,20 +132,20 @@ def encode(image, ext):
     raise ValueError(f"unsupported image format {ext!r} (use one of {', '.join(ALL_FORMATS)})")
 
 
-def write_image(path, image):
+def write_image(path, image, display=None):
     """Write atomically: a reader sees the old file or the new one, never half of one."""
-    write_images([path], image)
+    write_images([path], image, display)
 
 
-def write_images(paths, image):
+def write_images(paths, image, display=None):
     """Write ``image`` (or, a list, image i to path i) to each of ``paths`` (a PNG and its
     float twin; with the denoiser also the raw image and the auxiliary images) as one unit: every
     file is encoded and written to a temporary file beside its target first, and only
     when all are complete are they renamed over the targets, so the files never come
     from different passes and a reader never sees half of one. On failure nothing is
-    replaced and no temporary file is left."""
+    replaced and no temporary file is left. ``display``: see encode."""
     images = image if isinstance(image, (list, tuple)) else [image] * len(paths)
-    data = [encode(im, os.path.splitext(p)[1]) for im, p in zip(images, paths)]
+    data = [encode(im, os.path.splitext(p)[1], display) for im, p in zip(images, paths)]
     temps = []
     try:
         umask = os.umask(0)

@@ -29,3 +29,5 @@ MAX_PASS_SAMPLES = 2 ** 16        # samples per pixel in one pass (the progressi
 MIN_TAN_HALF_FOV = 1e-6
 MAX_TAN_HALF_FOV = 1e6
 MAX_UV = 1e6                       # |tile| and |offset| of textures
+# Exposure (EV) of 8-bit outputs: 2^+-64 stays far inside float64 and float32 radiance.
+MAX_EXPOSURE = 64.0

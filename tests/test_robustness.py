@@ -330,11 +330,11 @@ def test_failing_periodic_save_warns_and_the_final_save_succeeds(tmp_path, capsy
     calls = []
     real = film.write_images
 
-    def flaky(paths, image):
+    def flaky(paths, image, display=None):
         calls.append(paths)
         if len(calls) == 1:      # the first save is a periodic one (at >= 1 s of 2.5)
             raise OSError(28, "No space left on device")
-        return real(paths, image)
+        return real(paths, image, display)
 
     monkeypatch.setattr(cli, "write_images", flaky)
     path = write_scene(tmp_path, furnace_scene(0.5, 0.5, 2, res=(8, 6)))
@@ -350,10 +350,10 @@ def test_failing_final_save_falls_back_and_says_where(tmp_path, capsys, monkeypa
     real = film.write_images
     target = str(tmp_path / "out")
 
-    def refuse_target(paths, image):
+    def refuse_target(paths, image, display=None):
         if any(os.path.abspath(p).startswith(target) for p in paths):
             raise OSError(30, "Read-only file system")
-        return real(paths, image)
+        return real(paths, image, display)
 
     monkeypatch.setattr(cli, "write_images", refuse_target)
     (tmp_path / "out").mkdir()

@@ -37,6 +37,7 @@ class Camera:
 
 
 SAMPLERS = ("sobol", "independent")
+TONEMAPS = ("clamp", "aces", "agx")          # pathtracer.tonemap.TONEMAPS
 
 
 @dataclass
@@ -46,6 +47,8 @@ class RenderSettings:
     rr_depth: int = 5
     seed: int = 0
     sampler: str = "sobol"     # or "independent"
+    exposure: float = 0.0      # EV, 8-bit outputs only (pathtracer.tonemap)
+    tonemap: str = "clamp"     # or "aces", "agx"
 
 
 @dataclass
@@ -472,7 +475,9 @@ def _render(n):
         max_bounces=n.integer("maxBounces", 8, lo=0, hi=limits.MAX_BOUNCES),
         rr_depth=n.integer("rrDepth", 5, lo=0, hi=limits.MAX_BOUNCES),
         seed=n.integer("seed", 0, lo=0, hi=limits.MAX_SEED),
-        sampler=n.string("sampler", "sobol", choices=SAMPLERS))
+        sampler=n.string("sampler", "sobol", choices=SAMPLERS),
+        exposure=n.number("exposure", 0.0, lo=-limits.MAX_EXPOSURE, hi=limits.MAX_EXPOSURE),
+        tonemap=n.string("tonemap", "clamp", choices=TONEMAPS))
     n.finish()
     return r
 
