@@ -174,6 +174,7 @@ class StopSignals:
         self.pending = None
         self.raised = None        # the last signal raised as Interrupted (see check)
         self.unraisable_hook = None
+        self.stopping = False        # a stop signal has been raised in this run
 
     def __enter__(self):
         for s in STOP_SIGNALS:
@@ -188,7 +189,10 @@ class StopSignals:
     def __exit__(self, *exc):
         for s, h in self.previous.items():
             signal.signal(s, h)
-        sys.unraisablehook = self.unraisable_hook
+        if not self.stopping:
+            # (after a stop, finalisers that run as the process exits, such as the garbage
+            # collector's, stay quiet too)
+            sys.unraisablehook = self.unraisable_hook
         return False
 
     def _handler(self, signum, frame):
@@ -196,13 +200,17 @@ class StopSignals:
             self.pending = self.pending or signum
         else:
             self.raised = signum
+            self.stopping = True
             raise Interrupted(signum)
 
     def _unraisable(self, info):
         """A signal that arrives while Python runs a finaliser (Numba's compiler disposes
         of LLVM objects in __del__) raises there, where Python swallows the exception and
-        prints it: keep it quiet; check() raises it again."""
-        if not isinstance(info.exc_value, Interrupted):
+        prints it: keep it quiet; check() raises it again. Once a stop signal has been
+        raised, a finaliser's error is its consequence (an LLVM object whose constructor
+        the signal cut short fails in __del__: llvmlite's 'PipelineTuningOptions' has no
+        '_as_parameter_'), so it is kept quiet too: the stop is reported in one line."""
+        if not (isinstance(info.exc_value, Interrupted) or self.stopping):
             self.unraisable_hook(info)
 
     def check(self):
@@ -222,6 +230,7 @@ class StopSignals:
             self.defer -= 1
         if self.pending and raise_after and not self.defer:
             pending, self.pending = self.pending, None
+            self.stopping = True
             raise Interrupted(pending)
 
 

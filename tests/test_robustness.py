@@ -544,3 +544,22 @@ def test_mesh_cache_resolves_mtl_textures_per_folder(tmp_path, monkeypatch):
         paths.append(os.path.join(str(d), mesh.materials[0]["map_Kd"]))
     assert os.path.dirname(paths[0]) == str(tmp_path / "a")
     assert os.path.dirname(paths[1]) == str(tmp_path / "b")
+
+
+def test_finaliser_errors_after_a_stop_stay_quiet(monkeypatch):
+    """A stop signal that cuts an LLVM object's constructor short makes its finaliser fail
+    later ('PipelineTuningOptions' has no '_as_parameter_'): after a stop such errors are
+    kept quiet (the stop is one line); before one they are shown as usual."""
+    import types
+    from pathtracer.cli import StopSignals
+    shown = []
+    monkeypatch.setattr(sys, "unraisablehook", shown.append)
+    info = types.SimpleNamespace(exc_value=AttributeError("_as_parameter_"))
+    with StopSignals() as signals:
+        sys.unraisablehook(info)
+        assert len(shown) == 1
+        signals.stopping = True
+        sys.unraisablehook(info)
+        assert len(shown) == 1
+    sys.unraisablehook(info)             # still quiet as the process exits after a stop
+    assert len(shown) == 1
