@@ -42,7 +42,7 @@ from .geometry import safe_normalize, vertex_normals, vertex_tangents
 from .images import load_texture, read_image, srgb_to_linear
 from .loader import (EnvironmentMap, SceneDescription, TextureSpec, euler_matrix,
                      load_scene_description)
-from .meshes import load_obj
+from .meshes import load_mesh
 from ..memory import TRIANGLE_BYTES, require
 
 PRINCIPLED_NUMBERS = [p for p in MATERIAL_PARAMS if p.kind == "number"]
@@ -377,7 +377,7 @@ def _object_triangles(obj, desc, tables, mat_index, use_cache):
                        else tables.default_material(), np.int32)
         return pos, None, None, mats, 0.0
     t0 = time.perf_counter()
-    mesh = load_obj(obj.file, use_cache=use_cache)
+    mesh = load_mesh(obj.file, use_cache=use_cache)
     seconds = time.perf_counter() - t0
     pos = mesh.positions.astype(np.float64)
     file_normals = mesh.normals.astype(np.float64) if mesh.normals is not None else None

@@ -602,9 +602,9 @@ def _object(n, base, materials):
         if not os.path.isfile(obj.file):
             raise n.error(f"file not found: {obj.file}", "file")
         ext = os.path.splitext(obj.file)[1].lower()
-        if ext != ".obj":
-            raise n.error(f"unsupported mesh format {ext!r}: this version reads OBJ (.obj); "
-                          "PLY and glTF are not supported yet", "file")
+        if ext not in (".obj", ".ply"):
+            raise n.error(f"unsupported mesh format {ext!r}: this version reads OBJ (.obj) "
+                          "and PLY (.ply); glTF is not supported yet", "file")
     elif n.has("vertices") and n.has("faces"):
         obj.vertices = _array(n, "vertices", float, 3)
         obj.faces = _array(n, "faces", int, 3)

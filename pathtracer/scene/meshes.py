@@ -1,4 +1,5 @@
-"""OBJ meshes, read with pywavefront and cached on disk keyed by file content.
+"""Mesh files: OBJ, read with pywavefront and cached on disk keyed by file content, and PLY
+(ASCII or binary), read with plyfile (fast enough not to need the cache).
 
 A cached mesh is an ``.npz`` of unindexed triangles (positions, optional normals) and a
 per-face material index, with the .mtl material table beside it as JSON. The key is the
@@ -51,6 +52,62 @@ def _cache_key(path, data):
             with open(mtl, "rb") as f:
                 h.update(f.read())
     return h.hexdigest()
+
+
+MESH_FORMATS = (".obj", ".ply")
+
+# PLY vertex properties read as texture coordinates, the first pair present wins
+PLY_UV_NAMES = (("s", "t"), ("u", "v"), ("texture_u", "texture_v"), ("texture_s", "texture_t"))
+
+
+def load_mesh(path, use_cache=True):
+    """Triangles (and, for OBJ, materials) of the mesh file at ``path`` by its extension."""
+    if os.path.splitext(path)[1].lower() == ".ply":
+        return load_ply(path)
+    return load_obj(path, use_cache=use_cache)
+
+
+def load_ply(path):
+    """Triangles of a PLY mesh (ASCII or binary), read with plyfile: positions, vertex
+    normals (nx, ny, nz) and texture coordinates (PLY_UV_NAMES) where the file has them;
+    polygons are fanned into triangles. PLY has no materials: the object's own applies."""
+    from plyfile import PlyData
+    try:
+        ply = PlyData.read(path)
+    except OSError as e:
+        raise SceneError(f"cannot read: {e.strerror or e}", path) from None
+    except Exception as e:    # plyfile reports malformed headers and data in several types
+        raise SceneError(f"invalid PLY: {' '.join(str(e).split())[:200]}", path) from None
+    names = [el.name for el in ply.elements]
+    if "vertex" not in names or "face" not in names:
+        raise SceneError("a PLY mesh needs 'vertex' and 'face' elements", path)
+    v = ply["vertex"].data
+    props = set(v.dtype.names)
+    if not {"x", "y", "z"} <= props:
+        raise SceneError("PLY vertices need x, y and z", path)
+    with np.errstate(over="ignore"):     # > float32 range: inf, refused later
+        pos = np.stack([v["x"], v["y"], v["z"]], -1).astype(np.float32)
+        nrm = (np.stack([v["nx"], v["ny"], v["nz"]], -1).astype(np.float32)
+               if {"nx", "ny", "nz"} <= props else None)
+        uv = next((np.stack([v[a], v[b]], -1).astype(np.float32) for a, b in PLY_UV_NAMES
+                   if {a, b} <= props), None)
+    f = ply["face"].data
+    key = next((k for k in ("vertex_indices", "vertex_index") if k in f.dtype.names), None)
+    if key is None:
+        raise SceneError("PLY faces need a vertex_indices list", path)
+    polygons = f[key]
+    sizes = np.fromiter((len(p) for p in polygons), np.int64, len(polygons))
+    if len(polygons) and sizes.min() < 3:
+        raise SceneError("a PLY face has fewer than 3 vertices", path)
+    if len(polygons) and (sizes == 3).all():
+        tri = np.stack(polygons).astype(np.int64)
+    else:
+        tri = np.array([(p[0], p[i], p[i + 1]) for p in polygons for i in range(1, len(p) - 1)],
+                       np.int64).reshape(-1, 3)
+    if len(tri) and (tri.min() < 0 or tri.max() >= len(pos)):
+        raise SceneError("a PLY face refers to a vertex index that is out of range", path)
+    return ObjMesh(pos[tri], nrm[tri] if nrm is not None else None,
+                   uv[tri] if uv is not None else None, np.full(len(tri), -1, np.int32), [])
 
 
 def load_obj(path, use_cache=True):
