@@ -62,8 +62,10 @@ def _checker(tmp_path):
     iio.imwrite(tmp_path / "c.png", img)
 
 
-def test_ply_polygons_are_fanned_and_other_uv_names_read(tmp_path):
-    """A quad and a pentagon written by plyfile (ASCII), uvs named u, v, no normals."""
+@pytest.mark.parametrize("text", [True, False], ids=["ascii", "binary"])
+def test_ply_polygons_are_fanned_and_other_uv_names_read(tmp_path, text):
+    """A quad and a pentagon written by plyfile, uvs named u, v, no normals (binary: the
+    fast fixed-triangle read refuses the file and the general one reads it)."""
     from plyfile import PlyData, PlyElement
     angles = np.linspace(0, 2 * math.pi, 6)[:-1]
     verts = [(0, 0, 0, 0.0, 0.0), (1, 0, 0, 1.0, 0.0), (1, 1, 0, 1.0, 1.0), (0, 1, 0, 0.0, 1.0)]
@@ -73,7 +75,7 @@ def test_ply_polygons_are_fanned_and_other_uv_names_read(tmp_path):
     face = np.array([(np.array([0, 1, 2, 3]),), (np.arange(4, 9),)],
                     dtype=[("vertex_indices", object)])
     PlyData([PlyElement.describe(vertex, "vertex"), PlyElement.describe(face, "face")],
-            text=True).write(str(tmp_path / "p.ply"))
+            text=text).write(str(tmp_path / "p.ply"))
     mesh = load_mesh(str(tmp_path / "p.ply"))
     assert mesh.positions.shape == (2 + 3, 3, 3)
     assert mesh.normals is None and mesh.uvs is not None

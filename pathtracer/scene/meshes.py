@@ -73,7 +73,16 @@ def load_ply(path):
     polygons are fanned into triangles. PLY has no materials: the object's own applies."""
     from plyfile import PlyData
     try:
-        ply = PlyData.read(path)
+        try:
+            # triangles read as one fixed-size array (7.3 s -> 0.09 s for 1.6M binary
+            # triangles); a binary file with other polygons refuses this, an ASCII file
+            # ignores it: both then take the general path
+            ply = PlyData.read(path, known_list_len={"face": {"vertex_indices": 3,
+                                                              "vertex_index": 3}})
+        except OSError:
+            raise
+        except Exception:
+            ply = PlyData.read(path)
     except OSError as e:
         raise SceneError(f"cannot read: {e.strerror or e}", path) from None
     except Exception as e:    # plyfile reports malformed headers and data in several types
@@ -96,10 +105,13 @@ def load_ply(path):
     if key is None:
         raise SceneError("PLY faces need a vertex_indices list", path)
     polygons = f[key]
-    sizes = np.fromiter((len(p) for p in polygons), np.int64, len(polygons))
+    sizes = (np.full(len(polygons), polygons.shape[1]) if polygons.dtype != object else
+             np.fromiter((len(p) for p in polygons), np.int64, len(polygons)))
     if len(polygons) and sizes.min() < 3:
         raise SceneError("a PLY face has fewer than 3 vertices", path)
-    if len(polygons) and (sizes == 3).all():
+    if polygons.dtype != object:
+        tri = polygons.astype(np.int64)
+    elif len(polygons) and (sizes == 3).all():
         tri = np.stack(polygons).astype(np.int64)
     else:
         tri = np.array([(p[0], p[i], p[i + 1]) for p in polygons for i in range(1, len(p) - 1)],
