@@ -58,31 +58,14 @@ def our_scene(obj, png, spp=64, seed=0):
 def render_mitsuba(obj, png, spp, variant="llvm_ad_rgb"):
     import mitsuba as mi
     from pathtracer.mitsuba import mitsuba_bsdf
+    from tests.mitsuba_refs import render_mitsuba as render_sphere
     mi.set_variant(variant)
-    T = mi.ScalarTransform4f
-    scene = mi.load_dict({
-        "type": "scene",
-        "integrator": {"type": "path", "max_depth": MAX_BOUNCES + 1},
-        "sensor": {"type": "perspective", "fov": FOV, "fov_axis": "x",
-                   "to_world": T().look_at(origin=list(CAMERA), target=[0, 0, 0],
-                                           up=[0, 1, 0]),
-                   "film": {"type": "hdrfilm", "width": RES, "height": RES,
-                            "rfilter": {"type": "box"}, "pixel_format": "rgb"},
-                   "sampler": {"type": "independent", "sample_count": spp}},
-        "env": {"type": "envmap", "filename": GRADIENT,
-                "to_world": T().rotate([0, 1, 0], 180)},
-        "sphere": {"type": "obj", "filename": obj, "face_normals": False,
-                   "bsdf": {"type": "normalmap",
-                            "normalmap": {"type": "bitmap", "filename": png, "raw": True,
-                                          "filter_type": "bilinear",
-                                          "to_uv": T().scale([TILE[0], TILE[1], 1])},
-                            "bsdf": mitsuba_bsdf(MATERIAL)}},
-    })
-    img = np.zeros((RES, RES, 3))
-    passes = max(1, spp // 1024)
-    for k in range(passes):
-        img += np.array(mi.render(scene, spp=spp // passes, seed=k))
-    return (img / passes).astype(np.float32), mi.__version__
+    bsdf = {"type": "normalmap",
+            "normalmap": {"type": "bitmap", "filename": png, "raw": True,
+                          "filter_type": "bilinear",
+                          "to_uv": mi.ScalarTransform4f().scale([TILE[0], TILE[1], 1])},
+            "bsdf": mitsuba_bsdf(MATERIAL)}
+    return render_sphere(MATERIAL, GRADIENT, spp, variant, obj=obj, bsdf=bsdf)
 
 
 def main():

@@ -124,7 +124,9 @@ def our_scene(material, env_path, spp=64, seed=0):
     }
 
 
-def render_mitsuba(material, hdri_path, spp, variant="llvm_ad_rgb"):
+def render_mitsuba(material, hdri_path, spp, variant="llvm_ad_rgb", obj=SPHERE, bsdf=None):
+    """Mitsuba's image of ``obj`` (default: the smooth sphere) with ``material``'s BSDF, or
+    the Mitsuba BSDF dict ``bsdf``, under the environment ``hdri_path``; with its version."""
     import mitsuba as mi
     mi.set_variant(variant)
     T = mi.ScalarTransform4f
@@ -139,8 +141,8 @@ def render_mitsuba(material, hdri_path, spp, variant="llvm_ad_rgb"):
                    "sampler": {"type": "independent", "sample_count": spp}},
         "env": {"type": "envmap", "filename": hdri_path,
                 "to_world": T().rotate([0, 1, 0], 180)},
-        "sphere": {"type": "obj", "filename": SPHERE, "face_normals": False,
-                   "bsdf": mitsuba_bsdf(material)},
+        "sphere": {"type": "obj", "filename": obj, "face_normals": False,
+                   "bsdf": bsdf if bsdf is not None else mitsuba_bsdf(material)},
     })
     img = np.zeros((RES, RES, 3))
     passes = max(1, spp // 1024)
