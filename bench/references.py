@@ -43,7 +43,7 @@ def reference_noise(half_a, half_b, eps=0.01):
 
 def make_reference(name, spp, backend_name):
     from pathtracer.backends import make_backend
-    from pathtracer.render import render
+    from pathtracer.progressive import render
     from pathtracer.scene import compile_scene
     scene = compile_scene(convergence_desc(name))
     backend = make_backend(backend_name, scene)

@@ -29,7 +29,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 from bench.common import command, machine, median_time, now, usable_mitsuba, versions
 from bench.metrics import rays_per_second, relmse, time_to_threshold
-from bench.scenes import (CONVERGENCE, convergence_desc, load_reference,
+from bench.scenes import (CONVERGENCE, convergence_desc, convergence_scene, load_reference,
                           mesh_desc)
 
 FIELDS = ["section", "scene", "renderer", "parameter", "value", "metric", "result", "unit",
@@ -65,22 +65,19 @@ class Results:
 
 def convergence_ours(backend_name, name, max_spp, adaptive=None):
     """(seconds, spp, relMSE) after each progressive pass, compile excluded; ``adaptive``:
-    adaptive sampling to that per-pixel relMSE (render's ``adaptive``)."""
-    from pathtracer.backends import make_backend
-    from pathtracer.render import render
-    from pathtracer.scene import compile_scene
+    adaptive sampling to that per-pixel relMSE (render's ``adaptive``). Rendered through
+    the Python API, as the CLI renders."""
+    import pathtracer as pt
     ref, _ = load_reference(name)
-    scene = compile_scene(convergence_desc(name))
-    backend = make_backend(backend_name, scene)
-    backend.compile()
+    scene = convergence_scene(name)
     points = []
 
-    def on_pass(film, elapsed):
-        points.append((elapsed, film.spp, relmse(film.image(), ref)))
+    def on_pass(p):
+        points.append((p.elapsed, p.spp, relmse(p.image(), ref)))
 
     # passes of 1, 2, 4, ... spp: the error is measured at doubling sample counts
-    render(scene, backend, spp=max_spp, on_pass=on_pass, pass_seconds=float("inf"),
-           adaptive=adaptive)
+    pt.render(scene, spp=max_spp, backend=backend_name, callback=on_pass,
+              pass_seconds=float("inf"), adaptive=adaptive)
     return points
 
 
@@ -218,9 +215,7 @@ def section_samplers(scenes, backend_name, mitsuba_variant, spps, seeds, r):
     """relMSE at equal spp, the mean of ``seeds`` renders, of each of our samplers and of
     Mitsuba's independent and low-discrepancy samplers, each renderer against its own
     reference (the Cornell box: Mitsuba's, for both). {(scene, spp): {renderer: relMSE}}."""
-    from pathtracer.backends import make_backend
-    from pathtracer.render import render
-    from pathtracer.scene import compile_scene
+    import pathtracer as pt
     out = {}
     for name in scenes:
         try:
@@ -228,14 +223,11 @@ def section_samplers(scenes, backend_name, mitsuba_variant, spps, seeds, r):
         except FileNotFoundError:
             continue
         for sampler in OUR_SAMPLERS:
-            desc = convergence_desc(name)
-            desc.render.sampler = sampler
-            scene = compile_scene(desc)
-            backend = make_backend(backend_name, scene)
-            backend.compile()
+            scene = convergence_scene(name, sampler)
             for spp in spps:
-                err = float(np.mean([relmse(render(scene, backend, spp=spp, seed=s)
-                                            .film.image(), ref) for s in range(seeds)]))
+                err = float(np.mean([relmse(pt.render(scene, spp=spp, seed=s,
+                                                      backend=backend_name).image, ref)
+                                     for s in range(seeds)]))
                 out.setdefault((name, spp), {})[f"pt-render {backend_name} {sampler}"] = err
         if mitsuba_variant:
             import drjit as dr
@@ -293,7 +285,7 @@ def section_denoise(scenes, backend_name, low_spp, high_spp, repeats, r):
     {scene: record}."""
     from pathtracer.backends import make_backend
     from pathtracer.denoise import AOV_SPP, denoise
-    from pathtracer.render import render
+    from pathtracer.progressive import render
     from pathtracer.scene import compile_scene
     out = {}
     for name in scenes:

@@ -106,6 +106,17 @@ def convergence_desc(name):
     return desc
 
 
+def convergence_scene(name, sampler=None):
+    """The convergence scene ``name`` as a Python-API Scene (pathtracer.load_scene) at its
+    benchmark resolution; ``sampler`` overrides the scene's."""
+    from pathtracer.api import load_scene
+    source, res = CONVERGENCE[name]
+    overrides = {"resolution": res, "sampler": sampler}
+    if callable(source):
+        return load_scene(source(res), _overrides=overrides)
+    return load_scene(source, _overrides=overrides)
+
+
 def reference_path(name, mitsuba=False):
     return os.path.join(REFERENCES, f"{name}{'-mitsuba' if mitsuba else ''}.npz")
 

@@ -22,6 +22,7 @@ from .film import ALL_FORMATS, read_image, relmse, write_images
 from .scene import SceneError
 from .scene.loader import SAMPLERS, TONEMAPS
 
+PREVIEW_PORT = 8765
 STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP")
                      if hasattr(signal, n))
 
@@ -150,6 +151,17 @@ def build_parser():
     p.add_argument("--reference-csv", metavar="PATH",
                    help="where the relMSE table goes (default: OUTPUT_STEM.relmse.csv)")
     p.add_argument("--pixel", metavar="X,Y", help="python backend: render only this pixel")
+    p.add_argument("--preview", nargs="?", const=PREVIEW_PORT, type=_integer(0, 65535),
+                   metavar="PORT",
+                   help=f"serve a live preview page at http://127.0.0.1:PORT/ (default "
+                        f"{PREVIEW_PORT}; 0: any free port): the image as it converges, "
+                        "spp, samples/s, ETA, relMSE with --reference, a pass selector "
+                        "and exposure and tone-curve controls. After the render the page "
+                        "stays until Ctrl-C")
+    p.add_argument("--preview-host", default="127.0.0.1", metavar="ADDRESS",
+                   help="the address the preview listens on (default 127.0.0.1: this "
+                        "machine only; 0.0.0.0 shows it to the network, without any "
+                        "authentication)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--allow-missing", action="store_true",
                    help="thesis scene folders: render with defaults for missing files "
@@ -385,19 +397,13 @@ def _render(args, signals):
     if ext not in ALL_FORMATS:
         raise InputError(f"--output {output}: unknown image format {ext!r} "
                          f"(use {', '.join(ALL_FORMATS)})")
-    stem = os.path.splitext(output)[0]
-    targets = [output] + ([stem + ".exr"] if ext == ".png" else [])
-    # with --denoise: (path, what) for each file: "image" (denoised), "raw", "albedo", "normal"
-    kinds = ["image"] * len(targets)
     if args.denoise:
         from .denoise import check_available
         check_available()
-        raw = [os.path.splitext(t)[0] + "-raw" + os.path.splitext(t)[1] for t in targets]
-        targets, kinds = targets + raw, kinds + ["raw"] * len(raw)
-    if args.aovs:
-        aov_ext = ".npy" if ext == ".npy" else ".exr"
-        targets += [stem + "-albedo" + aov_ext, stem + "-normal" + aov_ext]
-        kinds += ["albedo", "normal"]
+    from .api import load_scene, output_files
+    from .api import render as render_scene
+    # what each file holds: "image" (denoised with --denoise), "raw", "albedo", "normal"
+    targets, kinds = output_files(output, denoised=args.denoise, aovs=args.aovs)
     for t in targets:
         _check_writable_folder(t, "--output")
     csv_path = None
@@ -406,21 +412,12 @@ def _render(args, signals):
         _check_writable_folder(csv_path, "--reference-csv")
 
     from .memory import check_film
-    from .scene import compile_scene, load_scene_description
     t0 = time.perf_counter()
-    desc = load_scene_description(scene_path, allow_missing=args.allow_missing)
-    for w in desc.warnings:
-        print(f"pt-render: warning: {w}", file=log)
-    if args.resolution:
-        desc.camera.resolution = args.resolution
-    if args.sampler:
-        desc.render.sampler = args.sampler
-    if args.exposure is not None:
-        desc.render.exposure = args.exposure
-    if args.tonemap:
-        desc.render.tonemap = args.tonemap
-    check_film(*desc.camera.resolution, args.backend)
-    scene = compile_scene(desc)
+    scene = load_scene(scene_path, allow_missing=args.allow_missing,
+                       _overrides={"resolution": args.resolution, "sampler": args.sampler,
+                                   "exposure": args.exposure, "tonemap": args.tonemap},
+                       _check=lambda desc: check_film(*desc.camera.resolution, args.backend))
+    signals.check()
     load_seconds = time.perf_counter() - t0
     for w in scene.warnings:
         print(f"pt-render: warning: {w}", file=log)
@@ -429,7 +426,7 @@ def _render(args, signals):
     if args.reference:
         reference = _read_reference(args.reference, scene)
 
-    pixels = None
+    options = {}
     if args.pixel:
         if args.backend != "python":
             raise InputError("--pixel needs --backend python")
@@ -440,48 +437,52 @@ def _render(args, signals):
         if not (0 <= x < scene.width and 0 <= y < scene.height):
             raise InputError(f"--pixel {x},{y} is outside the {scene.width}x{scene.height} "
                              "image")
-        pixels = [(x, y)]
-
-    from .backends import make_backend
-    try:
-        backend = make_backend(args.backend, scene, **({"pixels": pixels} if pixels else {}))
-    except RuntimeError as e:
-        raise InputError(str(e)) from None
+        options["pixels"] = ((x, y),)
 
     spp = args.spp if args.spp is not None else (None if args.time else scene.spp)
+    from .backends import cuda_available
+    backend_name = args.backend
+    if backend_name == "auto":
+        backend_name = "cuda" if cuda_available() else "cpu"
     print(f"pt-render: {scene_path}: {scene.width}x{scene.height}, {scene.n_triangles} "
-          f"triangles, loaded in {load_seconds:.2f} s (BVH {scene.timings['bvh_build']:.2f} s); "
-          f"backend {backend.name}; features "
+          f"triangles, loaded in {load_seconds:.2f} s (BVH "
+          f"{scene.compiled.timings['bvh_build']:.2f} s); backend {backend_name}; features "
           f"{', '.join(k for k, v in scene.features._asdict().items() if v) or 'none'}",
           file=log)
 
     from .progress import Progress
-    from .render import render
-    t0 = time.perf_counter()
-    if not args.quiet:
-        print("pt-render: compiling kernels (cached on disk after the first run)...", file=log)
-    backend.compile()
-    signals.check()
-    compile_seconds = time.perf_counter() - t0
-    if not args.quiet:
-        print(f"pt-render: kernels ready in {compile_seconds:.2f} s", file=log)
-    aovs = None
-    if args.denoise or args.aovs:
-        from .denoise import AOV_SPP
-        t_aov = time.perf_counter()
-        aovs = backend.aovs(AOV_SPP, scene.seed if args.seed is None else args.seed)
+    compile_seconds = [0.0]
+
+    def on_stage(stage, seconds):
+        if stage == "compiling" and not args.quiet:
+            print("pt-render: compiling kernels (cached on disk after the first run)...",
+                  file=log)
         signals.check()
-        if not args.quiet:
-            print(f"pt-render: albedo and normal images ({AOV_SPP} spp) in "
-                  f"{time.perf_counter() - t_aov:.2f} s", file=log)
+        if stage == "compiled":
+            compile_seconds[0] = seconds
+            if not args.quiet:
+                print(f"pt-render: kernels ready in {seconds:.2f} s", file=log)
+        if stage == "aovs" and not args.quiet:
+            from .denoise import AOV_SPP
+            print(f"pt-render: albedo and normal images ({AOV_SPP} spp) in {seconds:.2f} s",
+                  file=log)
+
     progress = Progress(spp, args.time, scene.width * scene.height, quiet=args.quiet,
                         stream=log)
     saver = Saver(targets, signals, lambda m: progress.write(f"pt-render: warning: {m}"),
-                  (desc.render.exposure, desc.render.tonemap))
+                  scene.display)
     denoise_seconds = []
+    preview = None
+    if args.preview is not None:
+        from .preview import PreviewServer
+        preview = PreviewServer(args.preview_host, args.preview, scene.display,
+                                target_spp=spp, time_limit=args.time,
+                                denoise=args.denoise)
+        print(f"pt-render: preview at {preview.url} ({preview.reach}; the render never "
+              "waits for it)", file=log)
 
-    def outputs(image):
-        """The image of each target: denoised, raw or auxiliary."""
+    def outputs(image, aovs):
+        """The image of each target (a periodic save): denoised, raw or auxiliary."""
         if kinds == ["image"] * len(kinds):
             return image
         shown = image
@@ -490,40 +491,52 @@ def _render(args, signals):
             t_dn = time.perf_counter()
             shown = denoise(image, aovs)
             denoise_seconds.append(time.perf_counter() - t_dn)
-        pick = {"image": shown, "raw": image}
-        if aovs is not None:
-            from .kernels.layout import AOV_ALBEDO, AOV_NORMAL
-            pick["albedo"] = aovs[..., AOV_ALBEDO:AOV_ALBEDO + 3]
-            pick["normal"] = aovs[..., AOV_NORMAL:AOV_NORMAL + 3]
+        pick = dict(aovs or {}, image=shown, raw=image)
         return [pick[k] for k in kinds]
     rows = []
     next_write = [1.0]
 
-    def on_pass(film, elapsed):
+    def on_pass(p):
+        film, elapsed = p.film, p.elapsed
         signals.check()
         progress.update(film.spp, elapsed)
+        err = None
         if reference is not None:
             err = relmse(film.image(), reference)
             rows.append((elapsed, film.spp, err))
             progress.write(f"{elapsed:10.3f} s {film.spp:8d} spp  relMSE {err:.6g}")
+        if preview is not None:
+            preview.publish(p, relmse=err)
         if elapsed >= next_write[0]:
-            saver.periodic(outputs(film.image()))
+            saver.periodic(outputs(film.image(), p.aovs))
             next_write[0] = elapsed * 2   # refresh at growing intervals
 
     if reference is not None:
         progress.write(f"{'elapsed':>12} {'spp':>12}  relMSE")
-    result = render(scene, backend, spp=spp, time_limit=args.time, seed=args.seed,
-                    max_bounces=args.max_bounces, on_pass=on_pass,
-                    pass_seconds=0.25 if backend.name == "cuda" else 0.5,
-                    adaptive=args.adaptive)
-    progress.close()
+    try:
+        result = render_scene(scene, spp=spp, time=args.time, seed=args.seed,
+                              backend=args.backend, callback=on_pass,
+                              max_bounces=args.max_bounces, adaptive=args.adaptive,
+                              aovs=args.aovs, denoise=args.denoise,
+                              _backend_options=options, _on_stage=on_stage)
+    except BaseException:
+        if preview is not None:
+            preview.close()
+        raise
+    finally:
+        progress.close()
     film = result.film
     if film.spp == 0:
+        if preview is not None:
+            preview.close()
         if result.interrupted:
             print("pt-render: stopped before the first pass; no image written", file=log)
             return 128 + result.signal
         raise OutputError("no samples were rendered; no image written")
-    written = saver.final(outputs(film.image()))
+    if result.raw is not None:
+        denoise_seconds.append(result.denoise_seconds)
+    # the final images are the result's (denoised once, by render)
+    written = saver.final([image for _, image in result.outputs(output, aovs=args.aovs)])
     if args.adaptive:
         done = float((film.count < film.spp).mean())
         print(f"pt-render: adaptive: {film.count.mean():.1f} spp per pixel on average "
@@ -542,20 +555,30 @@ def _render(args, signals):
             raise OutputError(f"--reference-csv {csv_path}: cannot write "
                               f"({e.strerror or e}); the image was written") from None
         print(f"pt-render: relMSE table written to {csv_path}", file=log)
-    paths = film.camera_rays / result.seconds if result.seconds > 0 else float("nan")
-    rays = (film.camera_rays + film.bounce_rays + film.shadow_rays)
+    stats = result.stats
     print(f"pt-render: {film.spp} spp in {result.seconds:.2f} s (compile "
-          f"{compile_seconds:.2f} s): {paths / 1e6:.3f} M camera paths/s, "
-          f"{rays / max(result.seconds, 1e-9) / 1e6:.3f} M rays/s; wrote "
+          f"{compile_seconds[0]:.2f} s): {stats['paths_per_second'] / 1e6:.3f} M camera "
+          f"paths/s, {stats['rays_per_second'] / 1e6:.3f} M rays/s; wrote "
           f"{' and '.join(written)}", file=log)
     if film.nonfinite:
         print(f"pt-render: warning: {film.nonfinite} of {film.camera_rays} samples were NaN "
               "or infinite and were left out of the image (please report this scene)",
               file=log)
     if result.interrupted:
+        if preview is not None:
+            preview.close()
         print(f"pt-render: interrupted ({signal.Signals(result.signal).name}); the image "
               "holds the samples done so far", file=log)
         return 128 + result.signal
+    if preview is not None:
+        preview.finish(film, result.seconds)
+        print(f"pt-render: done; the preview stays at {preview.url} until Ctrl-C", file=log)
+        try:
+            preview.wait()
+        except KeyboardInterrupt:
+            pass
+        finally:
+            preview.close()
     return EXIT_OK
 
 

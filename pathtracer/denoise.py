@@ -30,11 +30,14 @@ def check_available():
 
 def denoise(color, aovs):
     """The denoised image (float32 HxWx3) of ``color`` (linear HDR) with the auxiliary
-    images ``aovs`` (H x W x AOV_WIDTH, layout AOV_*: albedo, normal)."""
+    images ``aovs``: {"albedo", "normal"}, or one H x W x AOV_WIDTH array (layout AOV_*)."""
     import pyoidn
-    albedo = np.ascontiguousarray(np.clip(aovs[..., AOV_ALBEDO:AOV_ALBEDO + 3], 0.0, 1.0),
-                                  np.float32)
-    normal = np.ascontiguousarray(np.clip(aovs[..., AOV_NORMAL:AOV_NORMAL + 3], -1.0, 1.0),
-                                  np.float32)
+    if isinstance(aovs, dict):
+        albedo, normal = aovs["albedo"], aovs["normal"]
+    else:
+        albedo = aovs[..., AOV_ALBEDO:AOV_ALBEDO + 3]
+        normal = aovs[..., AOV_NORMAL:AOV_NORMAL + 3]
+    albedo = np.ascontiguousarray(np.clip(albedo, 0.0, 1.0), np.float32)
+    normal = np.ascontiguousarray(np.clip(normal, -1.0, 1.0), np.float32)
     color = np.ascontiguousarray(np.maximum(color, 0.0), np.float32)
     return pyoidn.denoise(color, albedo, normal, hdr=True)

@@ -26,7 +26,7 @@ class Film:
     render. ``spp`` counts the samples of the passes; with adaptive sampling a finished
     pixel takes no more, and ``count`` holds each pixel's own number. ``sum_b`` and
     ``count_b``: the part of the sums from the second half of each adaptive pass, for the
-    per-pixel error estimate (:func:`pathtracer.render.error_estimate`)."""
+    per-pixel error estimate (:func:`pathtracer.progressive.error_estimate`)."""
     height: int
     width: int
     sum: np.ndarray = None

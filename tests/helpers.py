@@ -8,7 +8,7 @@ import numpy as np
 from pathtracer.backends import make_backend
 from pathtracer.kernels.layout import P_FIELDS
 from pathtracer.kernels.rng import path_key, sample_1d, sample_sobol
-from pathtracer.render import render
+from pathtracer.progressive import render
 from pathtracer.scene.geometry import uv_sphere
 
 

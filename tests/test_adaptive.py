@@ -5,7 +5,7 @@ import os
 
 from pathtracer.backends import make_backend
 from pathtracer.film import relmse
-from pathtracer.render import ADAPTIVE_MIN_SPP, error_estimate, render
+from pathtracer.progressive import ADAPTIVE_MIN_SPP, error_estimate, render
 from pathtracer.scene import compile_scene, load_scene_description
 from tests.conftest import ROOT
 

@@ -133,7 +133,7 @@ def _reference_mismatch(desc, reference, spp=32):
     the variance of one render, a - c twice it); any difference between the scene and the
     reference's scene adds to the numerator only."""
     from pathtracer.backends import make_backend
-    from pathtracer.render import render
+    from pathtracer.progressive import render
     from pathtracer.scene import compile_scene
     scene = compile_scene(desc)
     backend = make_backend("cpu", scene)
@@ -156,3 +156,14 @@ def test_committed_references_are_the_current_scenes():
     desc = convergence_desc("bunny-studio")
     desc.materials["bunny"].numbers["roughness"] *= 1.1
     assert _reference_mismatch(desc, load_reference("bunny-studio")[0]) > 0.4
+
+
+def test_sweep_benchmark_runs_api_and_cli(tmp_path):
+    """bench/sweep.py's two ways of ours, tiny: the API re-renders compile nothing and the
+    CLI runs render the same number of samples."""
+    from bench.sweep import run_api, run_cli
+    api = run_api("cpu", 3, 2, 16, 12)
+    assert api["compile_later_s"] == 0.0 and len(api["walls_s"]) == 3
+    assert 0 <= api["overhead_median_s"] < api["median_s"]
+    cli = run_cli("cpu", 3, 2, 16, 12)
+    assert len(cli["walls_s"]) == 3 and cli["render_median_s"] >= 0   # (printed to 0.01 s)

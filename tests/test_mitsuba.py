@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from pathtracer.backends import make_backend
-from pathtracer.render import render
+from pathtracer.progressive import render
 from pathtracer.scene import load_scene
 from tests.conftest import BACKENDS, SHARED, needs_shared
 from tests.mitsuba_refs import CASES, REF_DIR, env_for, our_scene

@@ -8,7 +8,7 @@ import pytest
 
 from pathtracer.backends import make_backend
 from pathtracer.film import relmse
-from pathtracer.render import render
+from pathtracer.progressive import render
 from pathtracer.scene import load_scene
 from tests.conftest import BACKENDS, ROOT, SHARED, gpu, needs_shared
 from tests.helpers import furnace_scene, mean_and_se, run, write_scene

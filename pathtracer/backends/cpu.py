@@ -16,7 +16,8 @@ def pass_kernel(features):
     render_pixel = make_render_pixel(features)
 
     # error_model='numpy': float division by zero gives inf/nan as on the GPU, not an exception.
-    @njit(parallel=True, cache=jit_cache(), error_model="numpy")
+    # nogil: other Python threads (the live preview's server) run while a pass renders.
+    @njit(parallel=True, nogil=True, cache=jit_cache(), error_model="numpy")
     def render_pass(out, stats, sample_start, n_samples, seed, max_bounces, rr_depth, scene,
                     active):
         for py in prange(out.shape[0]):
@@ -37,7 +38,7 @@ def pass_kernel(features):
 def aov_kernel(features):
     aov_pixel = make_aov_pixel(features)
 
-    @njit(parallel=True, cache=jit_cache(), error_model="numpy")
+    @njit(parallel=True, nogil=True, cache=jit_cache(), error_model="numpy")
     def aov_pass(out, n_samples, seed, scene):
         for py in prange(out.shape[0]):
             stack = np.empty(STACK_SIZE, np.int32)
@@ -56,6 +57,11 @@ class CPUBackend:
         self.out = np.zeros((scene.height, scene.width, 3), np.float32)
         self.stats = np.zeros((scene.height, scene.width, 3), np.int32)
         self.all_pixels = np.ones((scene.height, scene.width), np.uint8)
+
+    def update(self, scene):
+        """Render ``scene`` from now on: the same features and image size (the Python
+        API's re-render; nothing is compiled)."""
+        self.scene = scene
 
     def compile(self):
         """Compile (or load from the disk cache) without rendering."""

@@ -131,6 +131,15 @@ class CUDABackend:
         self.grid = ((w + self.block[0] - 1) // self.block[0],
                      (h + self.block[1] - 1) // self.block[1])
 
+    def update(self, scene):
+        """Render ``scene`` from now on: the same features and image size (the Python
+        API's re-render; nothing is compiled). Only the arrays that changed are copied to
+        the GPU (an unchanged BVH and mesh stay where they are)."""
+        old = self.scene.arrays
+        self.d_scene = SceneArrays(*[d if a is o else cuda.to_device(a)
+                                     for a, o, d in zip(scene.arrays, old, self.d_scene)])
+        self.scene = scene
+
     def compile(self):
         """Compile (or load from the disk cache) both kernels without rendering, so that no
         pass pays for it."""

@@ -17,6 +17,10 @@ class PythonBackend:
         self.out = np.zeros((scene.height, scene.width, 3), np.float32)
         self.stats = np.zeros((scene.height, scene.width, 3), np.int32)
 
+    def update(self, scene):
+        """Render ``scene`` from now on (same features and image size)."""
+        self.scene = scene
+
     def compile(self):
         pass
 

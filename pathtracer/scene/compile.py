@@ -67,26 +67,71 @@ class CompiledScene:
     warnings: list = field(default_factory=list)
 
 
+class CompileMemo:
+    """What a re-compile of the same scene can take from the last one (the Python API's
+    ``Scene.set``): decoded meshes, textures and environment tables by file (path, size,
+    modification time), objects in world space by their transform, and the triangles with
+    their BVH while the geometry is unchanged. Entries the last compile did not use are
+    dropped, so a sweep over transforms does not accumulate copies."""
+
+    def __init__(self):
+        self.entries = {}
+        self.used = set()
+
+    def get(self, key, make):
+        self.used.add(key)
+        if key not in self.entries:
+            self.entries[key] = make()
+        return self.entries[key]
+
+    def start(self):
+        self.used = set()
+
+    def prune(self):
+        self.entries = {k: v for k, v in self.entries.items() if k in self.used}
+
+
+def file_key(path):
+    """A file's identity for CompileMemo: path, size and modification time (a file changed
+    on disk is read again)."""
+    if path is None:
+        return (None,)
+    try:
+        st = os.stat(path)
+        return (path, st.st_size, st.st_mtime_ns)
+    except OSError:
+        return (path, None, None)     # reading it reports the error
+
+
 def load_scene(path, use_cache=True, allow_missing=False):
     """Read, validate and compile the scene file (or thesis scene folder) at ``path``."""
     return compile_scene(load_scene_description(path, allow_missing=allow_missing),
                          use_cache=use_cache)
 
 
-def compile_scene(desc, use_cache=True, bvh_options=None):
+def compile_scene(desc, use_cache=True, bvh_options=None, memo=None):
     """Flat arrays and feature set of a scene description. ``bvh_options`` (benchmarks):
-    keyword arguments of ``accel.build_bvh`` (n_bins, max_leaf, split)."""
+    keyword arguments of ``accel.build_bvh`` (n_bins, max_leaf, split). ``memo`` (a
+    :class:`CompileMemo`): reuse what an earlier compile of the same scene read and built;
+    ``timings['bvh']`` then says whether the BVH was 'built' or 'reused'."""
     t_start = time.perf_counter()
-    tables, mat_index = compile_materials(desc)
-    objects, t_mesh = gather_geometry(desc, tables, mat_index, use_cache)
+    if memo is not None:
+        memo.start()
+    tables, mat_index = compile_materials(desc, memo)
+    objects, t_mesh = gather_geometry(desc, tables, mat_index, use_cache, memo)
     mat, mat_tex, tex_data, tex_int, tex_f = tables.arrays()
     use_textures = len(tables.tex_images) > 0
     _check_uvs(desc, objects, tables)
     use_tangents = any(o.uv is not None for o in objects) and (
         tables.any_normal_map or tables.any_anisotropic)
-    tri = compile_triangles(objects, use_textures, use_tangents, bvh_options)
+    bvh_state = "built"
+    if memo is None:
+        tri = compile_triangles(objects, use_textures, use_tangents, bvh_options)
+    else:
+        tri, bvh_state = _memo_triangles(memo, objects, use_textures, use_tangents,
+                                         bvh_options)
     lights = compile_lights(desc, tri, mat, tables.power, tri.shift)
-    env = compile_environment(desc, has_lights=len(lights.light_ref_list) > 0)
+    env = compile_environment(desc, has_lights=len(lights.light_ref_list) > 0, memo=memo)
     tri_light_pdf = triangle_light_pdfs(lights, tri, env.p_lights)
     features = Features(
         tri_lights=lights.has_tri_lights, point_lights=lights.has_point_lights,
@@ -108,8 +153,11 @@ def compile_scene(desc, use_cache=True, bvh_options=None):
         env_cond=env.cond, env_pdf=env.pdf, env_info=env.info)
     w, h = desc.camera.resolution
     r = desc.render
-    timings = {"mesh_load": t_mesh, "bvh_build": tri.bvh_seconds,
-               "total": time.perf_counter() - t_start}
+    timings = {"mesh_load": t_mesh,
+               "bvh_build": tri.bvh_seconds if bvh_state == "built" else 0.0,
+               "bvh": bvh_state, "total": time.perf_counter() - t_start}
+    if memo is not None:
+        memo.prune()
     return CompiledScene(arrays, features, w, h, r.spp, r.max_bounces, r.rr_depth, r.seed,
                          tri.n, desc, timings, tri.bvh.depth, tuple(tri.shift))
 
@@ -150,7 +198,8 @@ def camera_array(cam, shift=np.zeros(3)):
 class MaterialTables:
     """Materials and textures being collected into the kernel's arrays."""
 
-    def __init__(self, scene_file):
+    def __init__(self, scene_file, memo=None):
+        self.memo = memo
         self.rows = []
         self.tex_rows = []
         self.power = []            # mean emitted radiance per material (for light selection)
@@ -169,7 +218,10 @@ class MaterialTables:
         texel x scale products, see limits)."""
         key = (spec.path, spec.color_space, spec.filter, spec.tile, spec.offset, spec.scale)
         if key not in self.textures:
-            img = load_texture(spec, self.scene_file, allow_negative=slot == "normalMap")
+            def load():
+                return load_texture(spec, self.scene_file, allow_negative=slot == "normalMap")
+            img = load() if self.memo is None else self.memo.get(
+                ("texture", file_key(spec.path)) + key[1:] + (slot == "normalMap",), load)
             top = float(np.abs(img).max(initial=0)) * max(spec.scale)
             bound = {"emission": limits.MAX_RADIANCE, "albedo": limits.MAX_REFLECTANCE}.get(
                 slot, limits.MAX_RADIANCE)
@@ -256,9 +308,9 @@ class MaterialTables:
         return mat, mat_tex, np.ascontiguousarray(tex_data, np.float32), tex_int, tex_f
 
 
-def compile_materials(desc):
+def compile_materials(desc, memo=None):
     """The scene's own materials: the tables, and each material's row by name."""
-    tables = MaterialTables(desc.path)
+    tables = MaterialTables(desc.path, memo)
     mat_index = {}
     for name, m in desc.materials.items():
         mat_index[name] = tables.add(m.type, m.albedo, m.emission, m.two_sided, m.numbers,
@@ -355,33 +407,67 @@ class ObjectGeometry(NamedTuple):
     smooth: bool
 
 
-def gather_geometry(desc, tables, mat_index, use_cache=True):
+def gather_geometry(desc, tables, mat_index, use_cache=True, memo=None):
     """([ObjectGeometry], seconds spent reading mesh files)."""
     objects = []
     t_mesh = 0.0
     for obj in desc.objects:
         pos, file_normals, uv, mats, seconds = _object_triangles(obj, desc, tables, mat_index,
-                                                                 use_cache)
+                                                                 use_cache, memo)
         t_mesh += seconds
-        objects.append(_to_world(obj, desc, pos, file_normals, uv, mats))
+        if memo is None:
+            objects.append(_to_world(obj, desc, pos, file_normals, uv, mats))
+            continue
+        # the same mesh under the same transform: the same world-space arrays (the
+        # materials, cheap, are always taken anew)
+        key = ("world", id(pos), obj.matrix.tobytes(), bool(obj.smooth))
+        if obj.file is None:
+            key += (obj.vertices.tobytes(), obj.faces.tobytes())
+        geo = memo.get(key, lambda: _to_world(obj, desc, pos, file_normals, uv, mats))
+        objects.append(geo._replace(materials=mats))
     return objects, t_mesh
 
 
-def _object_triangles(obj, desc, tables, mat_index, use_cache):
+def _memo_triangles(memo, objects, use_textures, use_tangents, bvh_options):
+    """compile_triangles, or its last result when every object's world-space arrays are
+    the same ones and so are the per-face materials: (Triangles, 'built' or 'reused')."""
+    key = ("triangles", tuple((id(o.positions), id(o.normals), id(o.uv), o.smooth)
+                              for o in objects), use_textures, use_tangents,
+           repr(sorted((bvh_options or {}).items())))
+    mats = [o.materials for o in objects]
+    got = memo.entries.get(key)
+    if got is not None and len(got[1]) == len(mats) and all(
+            np.array_equal(a, b) for a, b in zip(got[1], mats)):
+        memo.used.add(key)
+        return got[0], "reused"
+    tri = compile_triangles(objects, use_textures, use_tangents, bvh_options)
+    memo.entries[key] = (tri, mats, objects)   # (the objects keep the ids valid)
+    memo.used.add(key)
+    return tri, "built"
+
+
+def _object_triangles(obj, desc, tables, mat_index, use_cache, memo=None):
     """Triangles of one object in its own space, with per-face material rows, and the
     seconds spent reading its mesh file."""
     where = obj.pointer
     if obj.file is None:
         pos = obj.vertices[obj.faces]
+        if memo is not None:     # the same array object for the same inline mesh
+            pos = memo.get(("inline", obj.vertices.tobytes(), obj.faces.tobytes()),
+                           lambda: pos)
         mats = np.full(len(pos), mat_index[obj.material] if obj.material is not None
                        else tables.default_material(), np.int32)
         return pos, None, None, mats, 0.0
     t0 = time.perf_counter()
-    mesh = load_mesh(obj.file, use_cache=use_cache)
+
+    def read():
+        mesh = load_mesh(obj.file, use_cache=use_cache)
+        return (mesh, mesh.positions.astype(np.float64),
+                mesh.normals.astype(np.float64) if mesh.normals is not None else None,
+                mesh.uvs.astype(np.float64) if mesh.uvs is not None else None)
+    mesh, pos, file_normals, uv = read() if memo is None else memo.get(
+        ("mesh", file_key(obj.file), use_cache), read)
     seconds = time.perf_counter() - t0
-    pos = mesh.positions.astype(np.float64)
-    file_normals = mesh.normals.astype(np.float64) if mesh.normals is not None else None
-    uv = mesh.uvs.astype(np.float64) if mesh.uvs is not None else None
     if obj.material is not None:
         mats = np.full(len(pos), mat_index[obj.material], np.int32)
     else:
@@ -525,7 +611,7 @@ class Environment(NamedTuple):
     p_lights: float        # probability that next-event estimation picks a light instead
 
 
-def compile_environment(desc, has_lights):
+def compile_environment(desc, has_lights, memo=None):
     """The environment's arrays. Next-event estimation picks an HDRI with probability 1/2
     when there are other lights (Mitsuba picks uniformly among emitters), else always."""
     color = np.zeros(3, np.float32)
@@ -537,7 +623,10 @@ def compile_environment(desc, has_lights):
     info[ENV_COS_ROT] = 1.0
     has_map = False
     if isinstance(desc.environment, EnvironmentMap):
-        got = _environment_map_tables(desc.environment, desc.path)
+        env_map = desc.environment
+        got = _environment_map_tables(env_map, desc.path) if memo is None else memo.get(
+            ("environment", file_key(env_map.path), env_map.intensity),
+            lambda: _environment_map_tables(env_map, desc.path))
         if got is not None:
             img, marg, cond, pdf = got
             has_map = True

@@ -330,28 +330,38 @@ def _strict_json(path):
         raise SceneError(f"invalid JSON{where}: {e}", path) from None
 
 
-def load_scene_description(path, allow_missing=False):
-    """Parse and validate ``path`` (a scene file, or a thesis renderer's scene folder);
-    raises :class:`SceneError` on any bad input."""
+def read_scene_data(path, allow_missing=False):
+    """(parsed JSON in this format, the scene file's absolute path, warnings) of a scene
+    file or a thesis renderer's scene folder (converted); not yet validated."""
     from .thesis import convert, is_thesis_folder, is_thesis_scene_file
     path = os.path.abspath(path)
-    warnings = []
     if os.path.isdir(path) or is_thesis_scene_file(path):
         folder = path if os.path.isdir(path) else os.path.dirname(path)
         if not is_thesis_folder(folder):
             raise SceneError("is a folder without a scene.json (expected a scene file or a "
                              "thesis renderer scene folder)", path)
-        data, path, warnings = convert(folder, allow_missing)
-    else:
-        data = _strict_json(path)
+        return convert(folder, allow_missing)
+    return _strict_json(path), path, []
+
+
+def load_scene_description(path, allow_missing=False):
+    """Parse and validate ``path`` (a scene file, or a thesis renderer's scene folder);
+    raises :class:`SceneError` on any bad input."""
+    data, path, warnings = read_scene_data(path, allow_missing)
     desc = _describe(data, path)
     desc.warnings.extend(warnings)
     return desc
 
 
-def _describe(data, path):
+def describe(data, path, base=None):
+    """Validate a scene given as parsed JSON (``path`` names it in error messages;
+    relative file names are read from ``base``, by default the folder of ``path``)."""
+    return _describe(data, path, base)
+
+
+def _describe(data, path, base=None):
     root = Node(data, "", path)
-    base = os.path.dirname(path)
+    base = os.path.dirname(path) if base is None else base
     if not root.has("camera"):
         raise root.error("missing required key 'camera'")
     camera = _camera(root.node("camera"))

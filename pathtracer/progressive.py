@@ -17,6 +17,7 @@ class RenderResult:
     seconds: float           # rendering time, compile excluded
     compile_seconds: float
     interrupted: bool = False
+    stopped: bool = False    # on_pass returned False
     signal: int = 0          # the signal that stopped the render (SIGINT for Ctrl-C)
     passes: list = field(default_factory=list)   # (elapsed s, spp) after each pass
 
@@ -51,7 +52,7 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
 
     Pass sizes start at 1 spp and double while a pass is shorter than ``pass_seconds``, so
     the image refreshes quickly at first and overhead stays small later. ``on_pass(film,
-    elapsed)`` is called after every pass. Ctrl-C (or any :class:`~.errors.Interrupted`)
+    elapsed)`` is called after every pass (returning False ends the render). Ctrl-C (or any :class:`~.errors.Interrupted`)
     stops the render and returns the samples of the passes completed (``interrupted`` and
     ``signal`` are set). A render never exceeds ``limits.MAX_SPP`` samples per pixel (the
     random streams are indexed by 32-bit sample numbers).
@@ -108,8 +109,9 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
             if adaptive and film.spp >= ADAPTIVE_MIN_SPP:
                 going = error_estimate(film) > adaptive
                 active = (going if active is None else going & (active != 0)).astype(np.uint8)
-            if on_pass is not None:
-                on_pass(film, elapsed)
+            if on_pass is not None and on_pass(film, elapsed) is False:
+                result.stopped = True
+                break
             if active is not None and not active.any():
                 break
             # Grow the pass while it is short; aim the last pass at the time limit.
