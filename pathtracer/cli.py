@@ -107,8 +107,8 @@ def build_parser():
                     "SIGTERM or SIGHUP stop the render and keep what is done. Exit codes: 0 "
                     "done, 2 bad input, 3 an output could not be written, 128+N stopped by "
                     "signal N (the image saved), 1 a bug.")
-    p.add_argument("scene", help="scene file (JSON, see docs/scene-format.md), or a thesis "
-                   "renderer scene folder")
+    p.add_argument("scene", help="scene file (JSON, see docs/scene-format.md; or a Mitsuba 3 "
+                   "XML scene, its common subset), or a thesis renderer scene folder")
     p.add_argument("-o", "--output", default=None,
                    help="output image; the extension picks the format: .png (8-bit sRGB, "
                         "with a lossless float .exr beside it), .hdr, .exr or .npy (float linear RGB). "

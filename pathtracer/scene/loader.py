@@ -332,9 +332,14 @@ def _strict_json(path):
 
 def read_scene_data(path, allow_missing=False):
     """(parsed JSON in this format, the scene file's absolute path, warnings) of a scene
-    file or a thesis renderer's scene folder (converted); not yet validated."""
+    file, a Mitsuba 3 XML scene or a thesis renderer's scene folder (converted); not yet
+    validated."""
     from .thesis import convert, is_thesis_folder, is_thesis_scene_file
     path = os.path.abspath(path)
+    if path.lower().endswith(".xml") and not os.path.isdir(path):
+        from .mitsuba_xml import convert_file
+        data, warnings = convert_file(path)
+        return data, path, warnings
     if os.path.isdir(path) or is_thesis_scene_file(path):
         folder = path if os.path.isdir(path) else os.path.dirname(path)
         if not is_thesis_folder(folder):

@@ -1,0 +1,639 @@
+"""Mitsuba 3 XML scenes (``pt-render scene.xml``): the common subset, translated to the JSON
+scene format and then validated and compiled like any scene. The mapping and every
+approximation are documented in docs/scene-format.md ("Mitsuba 3 XML scenes").
+
+Read with the standard library's ElementTree. ``<default name value>`` parameters are
+substituted for ``$name`` in attribute values; ``<ref id>`` (``<ref name="bsdf" id=..>``)
+names a BSDF declared at the top level. Anything outside the subset is a SceneError naming
+the element, never silently dropped; approximations give a warning.
+"""
+import math
+import os
+import re
+import xml.etree.ElementTree as ET
+
+import numpy as np
+
+from .errors import SceneError
+
+# principled parameters: Mitsuba name -> scene-format key (kernels.layout's parameter table)
+from ..kernels.layout import MATERIAL_PARAMS
+PRINCIPLED_KEYS = {p.mitsuba: p.key for p in MATERIAL_PARAMS if p.mitsuba}
+
+# named index of refraction values Mitsuba accepts for dielectrics (its ior table, the common ones)
+IOR_NAMES = {"vacuum": 1.0, "air": 1.00028, "water": 1.3330, "ice": 1.31, "acrylic glass": 1.49,
+             "polypropylene": 1.49, "bk7": 1.5046, "fused quartz": 1.458, "diamond": 2.419,
+             "sapphire": 1.77, "pyrex": 1.470, "polycarbonate": 1.58}
+
+
+class _Reader:
+    def __init__(self, path):
+        self.path = path
+        self.base = os.path.dirname(path)
+        self.defaults = {}
+        self.warnings = []
+        self.bsdfs = {}        # id -> element
+        self.where = {}        # element -> "/scene/shape[3] (id=light)"
+
+    def error(self, message, el=None):
+        return SceneError(message, self.path, self.where.get(el, "/scene") if el is not None
+                          else "/scene")
+
+    def warn(self, message, el=None):
+        where = self.where.get(el, "") if el is not None else ""
+        self.warnings.append(f"{self.path}: {where + ': ' if where else ''}{message}")
+
+    # -- values
+    def attr(self, el, name, default=None):
+        v = el.get(name, default)
+        if isinstance(v, str) and "$" in v:
+            def sub(m):
+                if m.group(1) not in self.defaults:
+                    raise self.error(f"${m.group(1)}: no <default name={m.group(1)!r}>", el)
+                return self.defaults[m.group(1)]
+            v = re.sub(r"\$([A-Za-z_][A-Za-z0-9_]*)", sub, v)
+        return v
+
+    def numbers(self, el, text, count=None):
+        try:
+            vals = [float(x) for x in re.split(r"[,\s]+", text.strip()) if x]
+        except ValueError:
+            raise self.error(f"expected numbers, got {text!r}", el) from None
+        if count is not None and len(vals) not in ((1, count) if count == 3 else (count,)):
+            raise self.error(f"expected {count} numbers, got {text!r}", el)
+        if not all(math.isfinite(x) for x in vals):
+            raise self.error(f"non-finite number in {text!r}", el)
+        return vals
+
+    def params(self, el):
+        """{name: (tag, element)} of an element's named children."""
+        out = {}
+        for child in el:
+            name = child.get("name")
+            if name is not None:
+                out[name] = (child.tag, child)
+        return out
+
+    def value(self, el):
+        """A plain value of a <float>, <integer>, <boolean>, <string>, <rgb>, <spectrum>,
+        <point>, <vector> element."""
+        tag = el.tag
+        if tag == "float":
+            return self.numbers(el, self.attr(el, "value", ""), 1)[0]
+        if tag == "integer":
+            v = self.numbers(el, self.attr(el, "value", ""), 1)[0]
+            if not v.is_integer():
+                raise self.error(f"expected an integer, got {v}", el)
+            return int(v)
+        if tag == "boolean":
+            v = self.attr(el, "value", "").strip().lower()
+            if v not in ("true", "false"):
+                raise self.error(f"expected true or false, got {v!r}", el)
+            return v == "true"
+        if tag == "string":
+            return self.attr(el, "value", "")
+        if tag == "rgb":
+            v = self.numbers(el, self.attr(el, "value", ""), 3)
+            return v * 3 if len(v) == 1 else v
+        if tag == "spectrum":
+            text = self.attr(el, "value", "")
+            if ":" in text or self.attr(el, "filename"):
+                raise self.error("a spectrum given by wavelengths or a file: pt-render renders "
+                                 "RGB; give <rgb> or a uniform <spectrum value=\"x\">", el)
+            v = self.numbers(el, text, 1)
+            return v * 3
+        if tag in ("point", "vector"):
+            if el.get("value") is not None:
+                return self.numbers(el, self.attr(el, "value"), 3)
+            return [float(self.numbers(el, self.attr(el, k, "0"), 1)[0]) for k in "xyz"]
+        raise self.error(f"unsupported <{tag}>", el)
+
+    def transform(self, el):
+        """The 4x4 matrix of a <transform>: its operations applied in order."""
+        m = np.eye(4)
+        for op in el:
+            if op.tag == "translate":
+                t = self._xyz(op, 0.0)
+                step = np.eye(4)
+                step[:3, 3] = t
+            elif op.tag == "scale":
+                if op.get("value") is not None:
+                    s = self.numbers(op, self.attr(op, "value"))
+                    s = s * 3 if len(s) == 1 else s
+                    if len(s) != 3:
+                        raise self.error("expected 1 or 3 numbers", op)
+                else:
+                    s = self._xyz(op, 1.0)
+                step = np.diag(list(s) + [1.0])
+            elif op.tag == "rotate":
+                axis = np.array(self._xyz(op, 0.0))
+                angle = self.numbers(op, self.attr(op, "angle", "0"), 1)[0]
+                if not np.linalg.norm(axis) > 0:
+                    raise self.error("rotation axis of zero length", op)
+                step = np.eye(4)
+                step[:3, :3] = _rotation(axis / np.linalg.norm(axis), math.radians(angle))
+            elif op.tag == "matrix":
+                v = self.numbers(op, self.attr(op, "value", ""))
+                if len(v) == 9:
+                    step = np.eye(4)
+                    step[:3, :3] = np.reshape(v, (3, 3))
+                elif len(v) == 16:
+                    step = np.reshape(v, (4, 4))
+                else:
+                    raise self.error("a matrix takes 9 or 16 numbers", op)
+            elif op.tag == "lookat":
+                origin = np.array(self.numbers(op, self.attr(op, "origin", ""), 3))
+                target = np.array(self.numbers(op, self.attr(op, "target", ""), 3))
+                up = np.array(self.numbers(op, self.attr(op, "up", "0 1 0"), 3))
+                step = _look_at(origin, target, up)
+                if step is None:
+                    raise self.error("lookat: origin equals target, or up is along the view",
+                                     op)
+            else:
+                raise self.error(f"unsupported transform operation <{op.tag}>", op)
+            m = step @ m
+        return m
+
+    def _xyz(self, el, default):
+        if el.get("value") is not None:
+            v = self.numbers(el, self.attr(el, "value"), 3)
+            return v * 3 if len(v) == 1 else v
+        return [self.numbers(el, self.attr(el, k, str(default)), 1)[0] for k in "xyz"]
+
+
+def _rotation(axis, angle):
+    """Rodrigues: rotation by ``angle`` radians about the unit ``axis`` (counter-clockwise
+    seen from the axis's tip, as Mitsuba's rotate)."""
+    x, y, z = axis
+    c, s = math.cos(angle), math.sin(angle)
+    C = 1 - c
+    return np.array([[c + x * x * C, x * y * C - z * s, x * z * C + y * s],
+                     [y * x * C + z * s, c + y * y * C, y * z * C - x * s],
+                     [z * x * C - y * s, z * y * C + x * s, c + z * z * C]])
+
+
+def _look_at(origin, target, up):
+    """Mitsuba's look_at: columns left = up x dir, up' = dir x left, dir, origin."""
+    d = target - origin
+    if not np.linalg.norm(d) > 0:
+        return None
+    d = d / np.linalg.norm(d)
+    left = np.cross(up, d)
+    if not np.linalg.norm(left) > 1e-12:
+        return None
+    left /= np.linalg.norm(left)
+    new_up = np.cross(d, left)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, new_up, d, origin
+    return m
+
+
+def convert_file(path):
+    """(scene dict in the JSON format, warnings) of the Mitsuba 3 XML file at ``path``."""
+    try:
+        tree = ET.parse(path)
+    except FileNotFoundError:
+        raise SceneError("scene file not found", path) from None
+    except OSError as e:
+        raise SceneError(f"cannot read: {e.strerror or e}", path) from None
+    except ET.ParseError as e:
+        raise SceneError(f"invalid XML: {e}", path) from None
+    root = tree.getroot()
+    r = _Reader(path)
+    if root.tag != "scene":
+        raise SceneError(f"expected a Mitsuba <scene> element, got <{root.tag}>", path)
+    version = root.get("version", "")
+    if re.match(r"0\.", version):
+        raise SceneError(f"a Mitsuba 0.6 scene (version {version}): pt-render reads Mitsuba 3's "
+                         "names only ('to_world', 'int_ior', 'sample_count', ...)", path)
+    if not version.startswith("3"):
+        r.warn(f"scene version {version or '(none)'}: read as Mitsuba 3 XML")
+    _index(r, root, "/scene")
+    for el in root:
+        if el.tag == "default":
+            name = el.get("name")
+            if not name:
+                raise r.error("<default> without a name", el)
+            r.defaults.setdefault(name, el.get("value", ""))
+    out = {"camera": {}, "render": {}, "materials": [], "objects": []}
+    materials = {}     # bsdf id or element -> material name
+    for el in root:
+        if el.tag == "bsdf":
+            bid = el.get("id")
+            if not bid:
+                raise r.error("a top-level <bsdf> needs an id", el)
+            r.bsdfs[bid] = el
+    have_sensor = False
+    for el in root:
+        tag = el.tag
+        if tag in ("default", "bsdf"):
+            continue
+        if tag == "integrator":
+            _integrator(r, el, out["render"])
+        elif tag == "sensor":
+            if have_sensor:
+                r.warn("more than one <sensor>: the first is used", el)
+                continue
+            have_sensor = True
+            _sensor(r, el, out)
+        elif tag == "shape":
+            _shape(r, el, out, materials)
+        elif tag == "emitter":
+            _emitter(r, el, out)
+        elif tag in ("texture",):
+            r.warn("a top-level <texture> is only used through a <ref>", el)
+        else:
+            raise r.error(f"<{tag}> is not supported (pt-render reads sensors, shapes, "
+                          "BSDFs, emitters and the path integrator)", el)
+    if not have_sensor:
+        raise r.error("no <sensor>: pt-render needs a camera")
+    if not out["materials"]:
+        del out["materials"]
+    return out, r.warnings
+
+
+def _index(r, el, where):
+    """Name every element by its path, for error messages."""
+    counts = {}
+    for child in el:
+        counts[child.tag] = counts.get(child.tag, 0) + 1
+        w = f"{where}/{child.tag}[{counts[child.tag]}]"
+        label = child.get("id") or child.get("name")
+        if child.get("type"):
+            w += f" (type={child.get('type')}{', ' + label if label else ''})"
+        elif label:
+            w += f" ({label})"
+        r.where[child] = w
+        _index(r, child, w)
+
+
+# ---------------------------------------------------------------------------------------
+
+def _integrator(r, el, render):
+    kind = el.get("type")
+    p = r.params(el)
+    if kind in ("path", "volpath"):
+        if kind == "volpath":
+            r.warn("volpath read as path (pt-render has no participating media)", el)
+        depth = r.value(p["max_depth"][1]) if "max_depth" in p else -1
+        if depth == 0:
+            raise r.error("max_depth 0 renders nothing", el)
+        render["maxBounces"] = 64 if depth < 0 else depth - 1
+        if depth < 0:
+            r.warn("max_depth -1 (unbounded) read as 64 bounces", el)
+        if "rr_depth" in p:
+            render["rrDepth"] = r.value(p["rr_depth"][1])
+        for k in p:
+            if k not in ("max_depth", "rr_depth", "hide_emitters"):
+                r.warn(f"integrator parameter {k!r} ignored", el)
+    elif kind == "direct":
+        render["maxBounces"] = 1
+    else:
+        raise r.error(f"integrator {kind!r} is not supported (path, volpath, direct)", el)
+
+
+def _sensor(r, el, out):
+    kind = el.get("type")
+    if kind not in ("perspective", "thinlens"):
+        raise r.error(f"sensor {kind!r} is not supported (perspective, thinlens)", el)
+    p = r.params(el)
+    cam = out["camera"]
+    width, height = 768, 576                       # Mitsuba's hdrfilm defaults
+    for child in el:
+        if child.tag == "film":
+            fp = r.params(child)
+            width = r.value(fp["width"][1]) if "width" in fp else width
+            height = r.value(fp["height"][1]) if "height" in fp else height
+            for f in child:
+                if f.tag == "rfilter" and f.get("type") != "box":
+                    r.warn(f"reconstruction filter {f.get('type')!r}: pt-render uses a box "
+                           "filter (one pixel)", f)
+                if f.tag == "rfilter" and f.get("type") is None:
+                    pass
+            if not any(f.tag == "rfilter" for f in child):
+                r.warn("no <rfilter>: Mitsuba's default is a Gaussian; pt-render uses a box "
+                       "filter (one pixel)", child)
+        elif child.tag == "sampler":
+            sp = r.params(child)
+            if "sample_count" in sp:
+                out["render"]["spp"] = r.value(sp["sample_count"][1])
+            if child.get("type") == "independent":
+                out["render"]["sampler"] = "independent"
+            if "seed" in sp:
+                out["render"]["seed"] = r.value(sp["seed"][1])
+    cam["resolution"] = [width, height]
+    m = r.transform(p["to_world"][1]) if "to_world" in p else np.eye(4)
+    origin = m[:3, 3]
+    fwd, up, left = m[:3, 2], m[:3, 1], m[:3, 0]
+    if not (np.linalg.norm(fwd) > 0 and np.linalg.norm(up) > 0):
+        raise r.error("the sensor's to_world is degenerate", el)
+    if np.dot(np.cross(up, fwd), left) <= 0:
+        raise r.error("the sensor's to_world mirrors the image (left != up x forward): not "
+                      "expressible as a camera position, target and up", el)
+    fwd_n = fwd / np.linalg.norm(fwd)
+    cam["position"] = origin.tolist()
+    cam["lookAt"] = (origin + fwd_n).tolist()
+    cam["up"] = (up / np.linalg.norm(up)).tolist()
+    if "focal_length" in p:
+        raise r.error("focal_length: give fov (pt-render does not read Mitsuba's "
+                      "focal-length strings)", p["focal_length"][1])
+    # Mitsuba's default: a 50 mm lens on a 36 mm wide film
+    fov = r.value(p["fov"][1]) if "fov" in p else math.degrees(2 * math.atan(36 / 100))
+    axis = r.value(p["fov_axis"][1]) if "fov_axis" in p else "x"
+    t = math.tan(math.radians(fov) / 2)
+    aspect = width / height
+    if axis == "x":
+        tx = t
+    elif axis == "y":
+        tx = t * aspect
+    elif axis in ("smaller", "larger"):
+        on_x = (width <= height) == (axis == "smaller")
+        tx = t if on_x else t * aspect
+    elif axis == "diagonal":
+        tx = t * aspect / math.hypot(aspect, 1.0)
+    else:
+        raise r.error(f"fov_axis {axis!r}: expected x, y, diagonal, smaller or larger", el)
+    cam["fov"] = math.degrees(2 * math.atan(tx))
+    if kind == "thinlens":
+        radius = r.value(p["aperture_radius"][1]) if "aperture_radius" in p else 0.0
+        focus = r.value(p["focus_distance"][1]) if "focus_distance" in p else 0.0
+        if radius > 0:
+            # the scene format's thin lens: radius = focalLength / (2 aperture), with the
+            # focal length derived from fov and the default 36 mm sensor width
+            focal = 0.036 / (2 * tx)
+            cam["aperture"] = focal / (2 * radius)
+            cam["focusDistance"] = focus
+
+
+def _rgb_or_texture(r, el, tag_el):
+    """A colour or a bitmap texture value in the scene format."""
+    tag, v = tag_el
+    if tag == "texture":
+        if v.get("type") != "bitmap":
+            raise r.error(f"texture {v.get('type')!r} is not supported (bitmap)", v)
+        tp = r.params(v)
+        if "filename" not in tp:
+            raise r.error("bitmap without a filename", v)
+        spec = {"texture": r.value(tp["filename"][1])}
+        raw = r.value(tp["raw"][1]) if "raw" in tp else False
+        spec["colorSpace"] = "linear" if raw else "sRGB"
+        if "filter_type" in tp:
+            ft = r.value(tp["filter_type"][1])
+            spec["filter"] = "nearest" if ft == "nearest" else "bilinear"
+        for k in tp:
+            if k not in ("filename", "raw", "filter_type"):
+                r.warn(f"bitmap parameter {k!r} ignored", v)
+        return spec
+    if tag == "ref":
+        raise r.error("a texture given by <ref> is not supported: give it inline", v)
+    return r.value(v)
+
+
+def _number(r, tag_el, what):
+    tag, v = tag_el
+    if tag in ("float", "integer"):
+        return float(r.value(v))
+    raise r.error(f"{what}: expected a <float> (textured values are not supported here)", v)
+
+
+def _bsdf(r, el, name):
+    """The scene-format material of a Mitsuba BSDF element."""
+    kind = el.get("type")
+    p = r.params(el)
+    if kind == "twosided":
+        inner = [c for c in el if c.tag in ("bsdf", "ref")]
+        if len(inner) != 1:
+            raise r.error("twosided takes one BSDF (two different sides are not supported)",
+                          el)
+        # our surfaces reflect on both sides anyway (a one-sided Mitsuba BSDF is black
+        # from behind: the one difference, documented); twoSided would only make an
+        # emitter emit on both sides, which a Mitsuba area emitter never does
+        return _bsdf(r, _deref(r, inner[0]), name)
+    if kind == "diffuse":
+        mat = {"name": name, "type": "diffuse"}
+        if "reflectance" in p:
+            mat["albedo"] = _rgb_or_texture(r, el, p["reflectance"])
+        return mat
+    if kind == "principled":
+        mat = {"name": name, "type": "principled"}
+        for k, (tag, v) in p.items():
+            if k == "base_color":
+                mat["albedo"] = _rgb_or_texture(r, el, (tag, v))
+            elif k in PRINCIPLED_KEYS and PRINCIPLED_KEYS[k] not in ("albedo", "emission"):
+                mat[PRINCIPLED_KEYS[k]] = _number(r, (tag, v), k)
+            else:
+                raise r.error(f"principled parameter {k!r} is not supported", v)
+        return mat
+    if kind in ("dielectric", "thindielectric", "roughdielectric"):
+        if kind == "thindielectric":
+            raise r.error("thindielectric is not supported (a closed glass mesh with "
+                          "dielectric is)", el)
+        eta = _ior(r, p, "int_ior", 1.5046) / _ior(r, p, "ext_ior", 1.000277)
+        mat = {"name": name, "type": "principled", "albedo": 1.0, "transmission": 1.0,
+               "roughness": 0.0, "eta": eta}
+        if kind == "roughdielectric":
+            mat["roughness"] = _roughness(r, el, p)
+            r.warn("roughdielectric read as the principled BSDF's rough transmission "
+                   "(the same GGX microfacets; Fresnel and energy differ slightly)", el)
+        _only(r, el, p, ("int_ior", "ext_ior", "alpha", "distribution", "specular_reflectance",
+                         "specular_transmittance"))
+        return mat
+    if kind in ("conductor", "roughconductor"):
+        material = r.value(p["material"][1]) if "material" in p else "none"
+        if material != "none" or "eta" in p or "k" in p:
+            raise r.error(f"{kind} with a complex index of refraction (material "
+                          f"{material!r}): not expressible exactly; use principled with "
+                          "metallic 1 and the metal's colour as base_color", el)
+        mat = {"name": name, "type": "principled", "metallic": 1.0, "roughness": 0.0,
+               "albedo": r.value(p["specular_reflectance"][1])
+               if "specular_reflectance" in p else 1.0}
+        if kind == "roughconductor":
+            mat["roughness"] = _roughness(r, el, p)
+        _only(r, el, p, ("material", "alpha", "distribution", "specular_reflectance"))
+        return mat
+    raise r.error(f"BSDF {kind!r} is not supported: diffuse, principled, dielectric, "
+                  "roughdielectric, conductor and roughconductor with material='none', "
+                  "twosided (plastic, roughplastic and others have no exact counterpart: "
+                  "use principled)", el)
+
+
+def _only(r, el, p, allowed):
+    for k in p:
+        if k not in allowed:
+            raise r.error(f"parameter {k!r} of {el.get('type')} is not supported", p[k][1])
+
+
+def _ior(r, p, key, default):
+    if key not in p:
+        return default
+    tag, v = p[key]
+    if tag == "string":
+        name = r.value(v).lower()
+        if name not in IOR_NAMES:
+            raise r.error(f"index of refraction {name!r}: not in pt-render's table "
+                          f"({', '.join(sorted(IOR_NAMES))}); give a number", v)
+        return IOR_NAMES[name]
+    return float(r.value(v))
+
+
+def _roughness(r, el, p):
+    """Mitsuba's GGX alpha -> the principled roughness (alpha = roughness^2)."""
+    if "distribution" in p and r.value(p["distribution"][1]) != "ggx":
+        raise r.error("only the GGX microfacet distribution is supported", el)
+    if "alpha_u" in p or "alpha_v" in p:
+        raise r.error("anisotropic alpha_u/alpha_v: not supported here (principled's "
+                      "anisotropic is)", el)
+    alpha = _number(r, p["alpha"], "alpha") if "alpha" in p else 0.1
+    if not 0 <= alpha <= 1:
+        raise r.error(f"alpha {alpha} outside [0, 1]", el)
+    return math.sqrt(alpha)
+
+
+def _deref(r, el):
+    if el.tag == "ref":
+        bid = el.get("id")
+        if bid not in r.bsdfs:
+            raise r.error(f"<ref id={bid!r}>: no BSDF with that id", el)
+        return r.bsdfs[bid]
+    return el
+
+
+def _material_of(r, bsdf_el, out, materials):
+    key = bsdf_el.get("id") or id(bsdf_el)
+    if key not in materials:
+        name = bsdf_el.get("id") or f"bsdf-{len(materials) + 1}"
+        out["materials"].append(_bsdf(r, bsdf_el, name))
+        materials[key] = name
+    return materials[key]
+
+
+def _shape_name(el, out):
+    return el.get("id") or f"shape-{len(out['objects']) + 1}"
+
+
+def _shape(r, el, out, materials):
+    kind = el.get("type")
+    p = r.params(el)
+    obj = {"name": _shape_name(el, out)}
+    m = r.transform(p["to_world"][1]) if "to_world" in p else np.eye(4)
+    if kind in ("obj", "ply"):
+        if "filename" not in p:
+            raise r.error(f"{kind} shape without a filename", el)
+        obj["file"] = r.value(p["filename"][1])
+        face_normals = r.value(p["face_normals"][1]) if "face_normals" in p else False
+        obj["smooth"] = not face_normals
+    elif kind == "rectangle":
+        obj["vertices"] = [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]
+        obj["faces"] = [[0, 1, 2], [0, 2, 3]]
+    elif kind == "cube":
+        obj["vertices"], obj["faces"] = _cube()
+    elif kind == "sphere":
+        from .geometry import uv_sphere
+        radius = r.value(p["radius"][1]) if "radius" in p else 1.0
+        center = r.value(p["center"][1]) if "center" in p else [0.0, 0.0, 0.0]
+        v, f = uv_sphere(64, 128, 1.0)
+        obj["vertices"], obj["faces"] = v.tolist(), f.tolist()
+        obj["smooth"] = True
+        local = np.eye(4)
+        local[:3, :3] *= radius
+        local[:3, 3] = center
+        m = m @ local
+        r.warn("sphere tessellated into 16,128 triangles (smooth normals)", el)
+    else:
+        raise r.error(f"shape {kind!r} is not supported (obj, ply, rectangle, cube, sphere)",
+                      el)
+    for k in p:
+        if k not in ("filename", "face_normals", "to_world", "radius", "center"):
+            if k == "flip_normals":
+                raise r.error("flip_normals is not supported", p[k][1])
+            r.warn(f"shape parameter {k!r} ignored", p[k][1])
+    if not np.allclose(m, np.eye(4)):
+        obj["transform"] = {"matrix": m.tolist()}
+    bsdf_el = None
+    emitter = None
+    for child in el:
+        if child.tag in ("bsdf", "ref"):
+            bsdf_el = _deref(r, child)
+        elif child.tag == "emitter":
+            if child.get("type") != "area":
+                raise r.error(f"a shape's emitter must be 'area', got {child.get('type')!r}",
+                              child)
+            ep = r.params(child)
+            emitter = r.value(ep["radiance"][1]) if "radiance" in ep else [1.0, 1.0, 1.0]
+    if bsdf_el is not None:
+        name = _material_of(r, bsdf_el, out, materials)
+    elif emitter is None:
+        name = _material_of(r, _DEFAULT_BSDF, out, materials)
+    else:
+        name = None
+    if emitter is not None:
+        # an emitting shape gets its own copy of its material, with the emission
+        base = next((dict(m_) for m_ in out["materials"] if m_["name"] == name),
+                    {"type": "diffuse", "albedo": 0.5})
+        base["name"] = f"{obj['name']}-emitter"
+        base["emission"] = emitter
+        out["materials"].append(base)
+        name = base["name"]
+    obj["material"] = name
+    out["objects"].append(obj)
+
+
+# Mitsuba's default BSDF: diffuse with reflectance 0.5
+_DEFAULT_BSDF = ET.Element("bsdf", {"type": "diffuse", "id": "default-diffuse"})
+
+
+def _cube():
+    """Mitsuba's cube: [-1, 1]^3, 12 triangles facing outward."""
+    v = [[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4),
+             (1, 5, 7, 3)]
+    faces = []
+    for a, b, c, d in quads:
+        for tri in ((a, b, c), (a, c, d)):
+            p0, p1, p2 = (np.array(v[i], float) for i in tri)
+            if np.dot(np.cross(p1 - p0, p2 - p0), p0 + p1 + p2) < 0:
+                tri = (tri[0], tri[2], tri[1])
+            faces.append(list(tri))
+    return v, faces
+
+
+def _emitter(r, el, out):
+    kind = el.get("type")
+    p = r.params(el)
+    if kind == "point":
+        pos = r.value(p["position"][1]) if "position" in p else None
+        if pos is None:
+            m = r.transform(p["to_world"][1]) if "to_world" in p else np.eye(4)
+            pos = m[:3, 3].tolist()
+        intensity = r.value(p["intensity"][1]) if "intensity" in p else [1.0, 1.0, 1.0]
+        out.setdefault("lights", []).append({"type": "point", "position": pos,
+                                             "intensity": intensity})
+    elif kind == "constant":
+        if "environment" in out:
+            raise r.error("more than one environment emitter", el)
+        out["environment"] = {"color": r.value(p["radiance"][1]) if "radiance" in p
+                              else [1.0, 1.0, 1.0]}
+    elif kind == "envmap":
+        if "environment" in out:
+            raise r.error("more than one environment emitter", el)
+        if "filename" not in p:
+            raise r.error("envmap without a filename", el)
+        env = {"file": r.value(p["filename"][1])}
+        if "scale" in p:
+            env["intensity"] = r.value(p["scale"][1])
+        m = r.transform(p["to_world"][1]) if "to_world" in p else np.eye(4)
+        # the scene format's map is Mitsuba's envmap turned 180 degrees about +Y
+        # (pathtracer/mitsuba.py); any other turn about +Y adds to our rotation
+        rot = m[:3, :3]
+        if not (np.allclose(rot[1], [0, 1, 0], atol=1e-6) and np.allclose(rot[:, 1], [0, 1, 0],
+                                                                          atol=1e-6)
+                and np.allclose(rot @ rot.T, np.eye(3), atol=1e-6)):
+            raise r.error("envmap to_world: only rotations about +Y are supported", el)
+        angle = math.degrees(math.atan2(rot[0, 2], rot[0, 0]))
+        env["rotation"] = (angle - 180 + 180) % 360 - 180
+        out["environment"] = env
+    elif kind == "area":
+        raise r.error("an area emitter belongs inside a <shape>", el)
+    else:
+        raise r.error(f"emitter {kind!r} is not supported (point, constant, envmap, area)",
+                      el)

@@ -1,0 +1,164 @@
+"""Mitsuba 3 XML scenes: the Cornell box written for Mitsuba renders as the reference, and
+the translation of each element of the supported subset (and the errors outside it)."""
+import importlib.util
+import math
+import os
+
+import numpy as np
+import pytest
+
+import pathtracer as pt
+from pathtracer.film import relmse
+from pathtracer.scene.mitsuba_xml import convert_file
+from tests.conftest import ROOT, needs_shared
+
+XML_CORNELL = os.path.join(ROOT, "scenes", "cornell-box-mitsuba.xml")
+REFERENCE = os.path.join(os.path.dirname(ROOT), "shared", "reference", "cornell-box",
+                         "reference_256_d8.npy")
+
+
+@needs_shared
+def test_xml_cornell_box_renders_as_the_reference():
+    """The XML box (rectangles and cubes with to_world transforms, an area emitter) renders
+    what the JSON box (the OBJ of the same quads) renders, and both match Mitsuba's image."""
+    ref = np.load(REFERENCE)
+    xml = pt.render(XML_CORNELL, spp=64, backend="cpu", sampler="sobol")
+    assert xml.image.shape == ref.shape
+    json_box = pt.render(os.path.join(ROOT, "scenes", "cornell-box.json"), spp=64,
+                         backend="cpu", sampler="sobol")
+    err_xml, err_json = relmse(xml.image, ref), relmse(json_box.image, ref)
+    assert err_xml < 1.2 * err_json + 1e-4, (err_xml, err_json)
+    means, ref_means = xml.image.mean(axis=(0, 1)), ref.mean(axis=(0, 1))
+    assert np.allclose(means, ref_means, rtol=0.005), (means, ref_means)
+
+
+@pytest.mark.skipif(importlib.util.find_spec("mitsuba") is None, reason="Mitsuba 3 not installed")
+def test_xml_cornell_box_is_loadable_by_mitsuba():
+    import mitsuba as mi
+    mi.set_variant("scalar_rgb")
+    scene = mi.load_file(XML_CORNELL, spp=2, res=16)
+    img = np.array(mi.render(scene))
+    assert img.shape == (16, 16, 3) and img.mean() > 0.05
+
+
+def write(tmp_path, body, name="scene.xml"):
+    path = tmp_path / name
+    path.write_text(f'<scene version="3.0.0">\n{body}\n</scene>\n')
+    return str(path)
+
+
+SENSOR = """<sensor type="perspective"><float name="fov" value="45"/>
+  <transform name="to_world"><lookat origin="0,1,5" target="0,1,0" up="0,1,0"/></transform>
+  <film type="hdrfilm"><integer name="width" value="64"/><integer name="height" value="32"/>
+  <rfilter type="box"/></film></sensor>"""
+
+
+def test_sensor_fov_axes_and_thin_lens(tmp_path):
+    for axis, expect in (("x", 45.0), ("y", math.degrees(2 * math.atan(2 * math.tan(
+            math.radians(22.5))))), ("smaller", None), ("larger", 45.0)):
+        body = SENSOR.replace('<float name="fov" value="45"/>',
+                              f'<float name="fov" value="45"/><string name="fov_axis" '
+                              f'value="{axis}"/>')
+        d, _ = convert_file(write(tmp_path, body))
+        if expect is None:        # smaller = y for a 64x32 film
+            expect = math.degrees(2 * math.atan(2 * math.tan(math.radians(22.5))))
+        assert d["camera"]["fov"] == pytest.approx(expect)
+        assert d["camera"]["position"] == [0, 1, 5] and d["camera"]["resolution"] == [64, 32]
+    body = SENSOR.replace('type="perspective"', 'type="thinlens"').replace(
+        '<float name="fov" value="45"/>', '<float name="fov" value="45"/><float '
+        'name="aperture_radius" value="0.01"/><float name="focus_distance" value="4"/>')
+    d, _ = convert_file(write(tmp_path, body))
+    focal = 0.036 / (2 * math.tan(math.radians(22.5)))
+    # the scene format's lens radius = focalLength / (2 aperture) = Mitsuba's radius
+    assert focal / (2 * d["camera"]["aperture"]) == pytest.approx(0.01)
+    assert d["camera"]["focusDistance"] == 4
+
+
+def test_defaults_refs_materials_and_emitters(tmp_path):
+    body = SENSOR + """
+<default name="rough" value="0.3"/>
+<integrator type="path"><integer name="max_depth" value="5"/><integer name="rr_depth" value="3"/></integrator>
+<bsdf type="principled" id="gold"><rgb name="base_color" value="1 0.8 0.3"/>
+  <float name="metallic" value="1"/><float name="roughness" value="$rough"/>
+  <float name="spec_trans" value="0"/></bsdf>
+<bsdf type="twosided" id="paper"><bsdf type="diffuse"><spectrum name="reflectance" value="0.7"/></bsdf></bsdf>
+<shape type="cube" id="box"><ref id="gold"/></shape>
+<shape type="rectangle" id="card"><ref name="bsdf" id="paper"/>
+  <transform name="to_world"><scale value="2"/><translate y="-1"/></transform></shape>
+<shape type="sphere" id="ball"><float name="radius" value="0.5"/><point name="center" x="1" y="0" z="0"/>
+  <bsdf type="dielectric"><string name="int_ior" value="bk7"/></bsdf></shape>
+<shape type="rectangle" id="mirror"><bsdf type="roughconductor"><string name="material" value="none"/>
+  <float name="alpha" value="0.04"/></bsdf></shape>
+<emitter type="point"><point name="position" value="0, 3, 0"/><rgb name="intensity" value="5"/></emitter>
+<emitter type="envmap"><string name="filename" value="sky.hdr"/><float name="scale" value="2"/>
+  <transform name="to_world"><rotate y="1" angle="200"/></transform></emitter>
+"""
+    d, warnings = convert_file(write(tmp_path, body))
+    mats = {m["name"]: m for m in d["materials"]}
+    assert mats["gold"] == {"name": "gold", "type": "principled", "albedo": [1, 0.8, 0.3],
+                            "metallic": 1.0, "roughness": 0.3, "transmission": 0.0}
+    assert mats["paper"] == {"name": "paper", "type": "diffuse", "albedo": [0.7] * 3}
+    glass = mats[d["objects"][2]["material"]]
+    assert glass["transmission"] == 1 and glass["eta"] == pytest.approx(1.5046 / 1.000277)
+    mirror = mats[d["objects"][3]["material"]]
+    assert mirror["metallic"] == 1 and mirror["roughness"] == pytest.approx(0.2)
+    assert d["render"] == {"maxBounces": 4, "rrDepth": 3}
+    card = np.array(d["objects"][1]["transform"]["matrix"])
+    assert np.allclose(card[:3, :3], 2 * np.eye(3)) and np.allclose(card[:3, 3], [0, -1, 0])
+    ball = d["objects"][2]
+    assert ball["smooth"] and any("tessellated" in w for w in warnings)
+    assert np.allclose(np.array(ball["transform"]["matrix"])[:3, 3], [1, 0, 0])
+    assert d["lights"] == [{"type": "point", "position": [0, 3, 0], "intensity": [5.0] * 3}]
+    # Mitsuba's envmap turned by A about +Y is ours turned by A - 180
+    assert d["environment"] == {"file": "sky.hdr", "intensity": 2.0,
+                                "rotation": pytest.approx(20.0)}
+
+
+def test_area_emitter_gets_its_own_material(tmp_path):
+    body = SENSOR + """<bsdf type="diffuse" id="white"><rgb name="reflectance" value="0.8"/></bsdf>
+<shape type="rectangle" id="lamp"><ref id="white"/><emitter type="area">
+  <rgb name="radiance" value="10, 9, 8"/></emitter></shape>
+<shape type="rectangle" id="wall"><ref id="white"/></shape>"""
+    d, _ = convert_file(write(tmp_path, body))
+    mats = {m["name"]: m for m in d["materials"]}
+    assert d["objects"][0]["material"] == "lamp-emitter"
+    assert mats["lamp-emitter"]["emission"] == [10, 9, 8]
+    assert mats["lamp-emitter"]["albedo"] == [0.8] * 3 and "emission" not in mats["white"]
+    scene = pt.load_scene(write(tmp_path, body))     # validated by the loader too
+    assert scene.features.tri_lights
+
+
+@pytest.mark.parametrize("body, message", [
+    ('<bsdf type="plastic" id="p"/>' '<shape type="cube"><ref id="p"/></shape>',
+     "BSDF 'plastic' is not supported"),
+    ('<shape type="cylinder"/>', "shape 'cylinder' is not supported"),
+    ('<shape type="cube"><ref id="nope"/></shape>', "no BSDF with that id"),
+    ('<shape type="cube"><bsdf type="conductor"><string name="material" value="Au"/></bsdf>'
+     '</shape>', "complex index of refraction"),
+    ('<medium type="homogeneous"/>', "<medium> is not supported"),
+    ('<shape type="obj"><string name="filename" value="$mesh"/></shape>', "$mesh: no <default"),
+    ('<emitter type="spot"/>', "emitter 'spot' is not supported"),
+    ('<integrator type="bdpt"/>', "integrator 'bdpt' is not supported"),
+])
+def test_unsupported_elements_are_named(tmp_path, body, message):
+    with pytest.raises(pt.SceneError, match=message.replace("$", r"\$").replace("(", r"\(")) \
+            as e:
+        convert_file(write(tmp_path, SENSOR + body))
+    assert "scene.xml" in str(e.value) and "/scene/" in str(e.value)
+
+
+def test_bad_files(tmp_path):
+    with pytest.raises(pt.SceneError, match="invalid XML"):
+        convert_file(write(tmp_path, "<shape"))
+    with pytest.raises(pt.SceneError, match="no <sensor>"):
+        convert_file(write(tmp_path, '<shape type="cube"/>'))
+    bad = tmp_path / "other.xml"
+    bad.write_text("<html/>")
+    with pytest.raises(pt.SceneError, match="expected a Mitsuba <scene>"):
+        convert_file(str(bad))
+    old = tmp_path / "old.xml"
+    old.write_text('<scene version="0.6.0"><shape type="cube"/></scene>')
+    with pytest.raises(pt.SceneError, match="Mitsuba 0.6 scene"):
+        convert_file(str(old))
+    with pytest.raises(pt.SceneError, match="not found"):
+        pt.load_scene(str(tmp_path / "missing.xml"))
