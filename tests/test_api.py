@@ -198,3 +198,15 @@ def test_python_api_doc(tmp_path, monkeypatch):
     assert (tmp_path / "cornell.png").exists() and (tmp_path / "cornell.exr").exists()
     means = namespace["means"]
     assert len(means) == 5 and all(m > 0 for m in means)
+
+
+def test_recompile_keeps_textures_and_bvh_arrays():
+    """A camera change re-uses the texels and the BVH arrays themselves (the GPU backend
+    re-uploads only arrays that are new objects)."""
+    scene = pt.load_scene(os.path.join(ROOT, "scenes", "textured.json"))
+    before = scene.compiled.arrays
+    scene.set("/camera/position", [0.2, 1.0, 3.0])
+    after = scene.compiled.arrays
+    for name in ("tex_data", "bvh_box", "bvh_child", "tri_v", "tri_n", "env_img", "env_cond"):
+        assert getattr(after, name) is getattr(before, name), name
+    assert after.cam is not before.cam

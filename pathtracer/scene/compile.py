@@ -287,9 +287,14 @@ class MaterialTables:
             return (mat, mat_tex, np.zeros((1, 3), np.float32),
                     np.zeros((1, TEX_INT_WIDTH), np.int32), np.zeros((1, TEX_F_WIDTH), np.float32))
         sizes = [im.shape[0] * im.shape[1] for im in self.tex_images]
-        # (one texture: a view, not a copy; the texels are float32 already)
-        tex_data = (self.tex_images[0].reshape(-1, 3) if len(self.tex_images) == 1 else
+
+        def texels():
+            # (one texture: a view, not a copy; the texels are float32 already)
+            return (self.tex_images[0].reshape(-1, 3) if len(self.tex_images) == 1 else
                     np.concatenate([im.reshape(-1, 3) for im in self.tex_images]))
+        # a re-compile with the same textures keeps the same array (the GPU keeps its copy)
+        tex_data = texels() if self.memo is None else self.memo.get(
+            ("texels",) + tuple(id(im) for im in self.tex_images), texels)
         tex_int = np.zeros((len(sizes), TEX_INT_WIDTH), np.int32)
         tex_f = np.zeros((len(sizes), TEX_F_WIDTH), np.float32)
         offs = np.concatenate([[0], np.cumsum(sizes)[:-1]])
@@ -305,7 +310,9 @@ class MaterialTables:
             tex_f[i, TEX_TILE:TEX_TILE + 2] = tile
             tex_f[i, TEX_OFFSET:TEX_OFFSET + 2] = offset
             tex_f[i, TEX_SCALE:TEX_SCALE + 3] = scale
-        return mat, mat_tex, np.ascontiguousarray(tex_data, np.float32), tex_int, tex_f
+        if tex_data.dtype != np.float32 or not tex_data.flags.c_contiguous:
+            tex_data = np.ascontiguousarray(tex_data, np.float32)
+        return mat, mat_tex, tex_data, tex_int, tex_f
 
 
 def compile_materials(desc, memo=None):
