@@ -208,3 +208,24 @@ def test_benchmark_variants_trace_the_same(rng, options):
     check_structure(bvh, v)
     if options.get("split") == "none":
         assert len(bvh.box) == 1 and bvh.child[0, L.CHILD0_COUNT] == len(v)
+
+
+@pytest.mark.parametrize("split", ["sah", "midpoint", "none"])
+def test_fast_builder_makes_the_plain_builders_tree(rng, split):
+    """The builder that carries node bounds with its tasks and reorders the triangle data
+    makes exactly the tree of the plain one (same nodes, boxes, order): images unchanged."""
+    from pathtracer.accel.bvh import PARALLEL_MIN
+    meshes = [rng.random((3000, 3, 3)).astype(np.float32),
+              # above PARALLEL_MIN: the top, the subtrees built in parallel, the assembly
+              rng.random((PARALLEL_MIN + 5000, 3, 3)).astype(np.float32),
+              np.repeat(rng.random((1, 3, 3)), 50, axis=0).astype(np.float32),
+              (rng.random((2000, 1, 3)) + rng.normal(0, 0.01, (2000, 3, 3))).astype(np.float32)]
+    bunny = os.path.join(SHARED, "assets", "models", "stanford_bunny.obj")
+    if os.path.exists(bunny):
+        meshes.append(load_obj(bunny).positions)
+    for pos in meshes:
+        fast = build_bvh(pos, split=split)
+        plain = build_bvh(pos, split=split, _plain=True)
+        assert fast.depth == plain.depth
+        for a, b in zip(fast[:3], plain[:3]):
+            assert np.array_equal(a, b)

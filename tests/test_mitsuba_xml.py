@@ -162,3 +162,59 @@ def test_bad_files(tmp_path):
         convert_file(str(old))
     with pytest.raises(pt.SceneError, match="not found"):
         pt.load_scene(str(tmp_path / "missing.xml"))
+
+
+# ---------------------------------------------------------------------------------------
+# Fuzzing: a mutated Mitsuba file loads or fails with one SceneError, never anything else
+
+import xml.etree.ElementTree as ET  # noqa: E402
+
+from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E402
+
+BAD_ATTRS = ["", "x", "nan", "inf", "-1", "1e39", "0", "1 2", "1,2,3,4", "$nope", "-0.5",
+             "999999999999999999999", "true", "rectangle", "none", "bk7"]
+TYPES = ["diffuse", "principled", "plastic", "cube", "sphere", "obj", "area", "point",
+         "envmap", "path", "perspective", "thinlens", "box", "bitmap", "twosided"]
+TAGS = ["float", "integer", "rgb", "spectrum", "string", "boolean", "point", "transform",
+        "bsdf", "shape", "emitter", "ref", "medium", "texture", "translate", "matrix"]
+
+
+@st.composite
+def mutated_xml(draw):
+    root = ET.parse(XML_CORNELL).getroot()
+    for _ in range(draw(st.integers(1, 4))):
+        elements = list(root.iter())
+        el = draw(st.sampled_from(elements))
+        action = draw(st.sampled_from(["attr", "attr", "delete", "type", "tag", "add"]))
+        if action == "attr" and el.attrib:
+            key = draw(st.sampled_from(sorted(el.attrib)))
+            el.set(key, draw(st.sampled_from(BAD_ATTRS)))
+        elif action == "delete" and el is not root:
+            parent = next(p for p in root.iter() if el in list(p))
+            parent.remove(el)
+        elif action == "type":
+            el.set("type", draw(st.sampled_from(TYPES)))
+        elif action == "tag" and el is not root:
+            el.tag = draw(st.sampled_from(TAGS))
+        elif action == "add":
+            child = ET.SubElement(el, draw(st.sampled_from(TAGS)))
+            child.set("name", draw(st.sampled_from(["value", "fov", "radiance", "to_world",
+                                                    "filename", "bsdf"])))
+            child.set("value", draw(st.sampled_from(BAD_ATTRS)))
+    return ET.tostring(root, encoding="unicode")
+
+
+@pytest.mark.filterwarnings("ignore")
+@settings(max_examples=int(os.environ.get("PT_FUZZ_EXAMPLES", "60")), deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+          derandomize=not os.environ.get("PT_FUZZ_RANDOM"))
+@given(text=mutated_xml())
+def test_fuzzed_mitsuba_xml_loads_or_names_the_error(tmp_path, text):
+    path = tmp_path / "fuzz.xml"
+    path.write_text(text)
+    try:
+        scene = pt.load_scene(str(path))
+    except pt.SceneError as e:
+        assert "\n" not in str(e) and str(e)
+        return
+    assert scene.width > 0 and scene.n_triangles >= 0

@@ -10,7 +10,7 @@ Triangles are reordered so every leaf is a contiguous range.
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from .._cache import jit_cache
 from ..kernels.constants import STACK_SIZE
@@ -22,6 +22,11 @@ from ..kernels.layout import (BOX_CHILD0, BOX_CHILD1, BOX_MAX, BOX_MIN, BOX_STRI
 C_TRAVERSAL = 1.0
 C_INTERSECT = 1.0
 MAX_DEPTH = STACK_SIZE - 4  # deeper subtrees become leaves: the traversal stack never overflows
+# Parallel build: above PARALLEL_MIN triangles, subtrees of at least 1/SUBTREE_FRACTION of
+# them are left by the first pass and built in parallel.
+PARALLEL_MIN = 1 << 16
+SUBTREE_FRACTION = 16
+DEFERRED = -7                # a child count marking a subtree built by another run
 
 
 class BVH(NamedTuple):
@@ -40,7 +45,409 @@ def _area(lo, hi):
 
 
 @njit(cache=jit_cache())
+def _run(t_lo, t_hi, cen, order, tasks, task_box, n_tasks, box, child, n_bins, max_leaf,
+         min_leaf_split, midpoint, defer, deferred, deferred_box):
+    """The build loop over the task stack ``tasks`` (rows: start, end, parent node, side,
+    depth, bounds known; ``task_box``: lo, hi, centroid lo, centroid hi) into the node
+    arrays ``box``/``child`` (node 0 is the root of whatever ``tasks`` holds). A task of
+    at least ``defer`` triangles (0: never) that would become an inner node below the root
+    is not built but appended to ``deferred`` (same row layout; its bounds in
+    ``deferred_box``), its node box already written in its parent: another run builds it.
+    Returns (nodes, depth, deferred count)."""
+    bin_lo = np.empty((3, n_bins, 3))
+    bin_hi = np.empty((3, n_bins, 3))
+    bin_n = np.empty((3, n_bins), np.int64)
+    right_area = np.empty(n_bins)
+    right_n = np.empty(n_bins, np.int64)
+    lo = np.empty(3)
+    hi = np.empty(3)
+    clo = np.empty(3)
+    chi = np.empty(3)
+    acc_lo = np.empty(3)
+    acc_hi = np.empty(3)
+    side_b = np.empty((2, 12))     # the children's bounds, as task_box rows
+    n_nodes = 1
+    n_deferred = 0
+    max_depth = 0
+    while n_tasks > 0:
+        n_tasks -= 1
+        start = tasks[n_tasks, 0]
+        end = tasks[n_tasks, 1]
+        parent = tasks[n_tasks, 2]
+        side = tasks[n_tasks, 3]
+        depth = tasks[n_tasks, 4]
+        max_depth = max(max_depth, depth)
+        count = end - start
+        if defer > 0 and parent >= 0 and count >= defer and count > max_leaf and \
+                count >= min_leaf_split and depth < MAX_DEPTH:
+            # another run builds this subtree; its box goes into the parent now
+            if not tasks[n_tasks, 5]:
+                for a in range(3):
+                    lo[a] = np.inf
+                    hi[a] = -np.inf
+                    clo[a] = np.inf
+                    chi[a] = -np.inf
+                for k in range(start, end):
+                    for a in range(3):
+                        lo[a] = min(lo[a], t_lo[k, a])
+                        hi[a] = max(hi[a], t_hi[k, a])
+                        clo[a] = min(clo[a], cen[k, a])
+                        chi[a] = max(chi[a], cen[k, a])
+                for a in range(3):
+                    task_box[n_tasks, a] = lo[a]
+                    task_box[n_tasks, 3 + a] = hi[a]
+                    task_box[n_tasks, 6 + a] = clo[a]
+                    task_box[n_tasks, 9 + a] = chi[a]
+                tasks[n_tasks, 5] = 1
+            for c in range(6):
+                deferred[n_deferred, c] = tasks[n_tasks, c]
+            for c in range(12):
+                deferred_box[n_deferred, c] = task_box[n_tasks, c]
+            b = BOX_CHILD0 + BOX_STRIDE * side
+            for c in range(3):
+                box[parent, b + BOX_MIN + c] = task_box[n_tasks, c]
+                box[parent, b + BOX_MAX + c] = task_box[n_tasks, 3 + c]
+            child[parent, CHILD_STRIDE * side + CHILD_INDEX] = n_deferred
+            child[parent, CHILD_STRIDE * side + CHILD_COUNT] = DEFERRED
+            n_deferred += 1
+            continue
+        if tasks[n_tasks, 5]:
+            for a in range(3):
+                lo[a] = task_box[n_tasks, a]
+                hi[a] = task_box[n_tasks, 3 + a]
+                clo[a] = task_box[n_tasks, 6 + a]
+                chi[a] = task_box[n_tasks, 9 + a]
+        else:
+            # Bounds of the range's triangles and of their centroids.
+            for a in range(3):
+                lo[a] = np.inf
+                hi[a] = -np.inf
+                clo[a] = np.inf
+                chi[a] = -np.inf
+            for k in range(start, end):
+                for a in range(3):
+                    lo[a] = min(lo[a], t_lo[k, a])
+                    hi[a] = max(hi[a], t_hi[k, a])
+                    clo[a] = min(clo[a], cen[k, a])
+                    chi[a] = max(chi[a], cen[k, a])
+        # Find the best binned split.
+        best_cost = np.inf
+        best_axis = -1
+        best_bin = 0
+        parent_area = _area(lo, hi)
+        binned = False
+        if count >= min_leaf_split and depth < MAX_DEPTH:
+            binned = True
+            for a in range(3):
+                for b in range(n_bins):
+                    bin_n[a, b] = 0
+                    for c in range(3):
+                        bin_lo[a, b, c] = np.inf
+                        bin_hi[a, b, c] = -np.inf
+            inv0 = n_bins / (chi[0] - clo[0]) if chi[0] - clo[0] > 0.0 else 0.0
+            inv1 = n_bins / (chi[1] - clo[1]) if chi[1] - clo[1] > 0.0 else 0.0
+            inv2 = n_bins / (chi[2] - clo[2]) if chi[2] - clo[2] > 0.0 else 0.0
+            for k in range(start, end):
+                x0 = t_lo[k, 0]
+                x1 = t_lo[k, 1]
+                x2 = t_lo[k, 2]
+                y0 = t_hi[k, 0]
+                y1 = t_hi[k, 1]
+                y2 = t_hi[k, 2]
+                for a in range(3):
+                    inv = inv0 if a == 0 else (inv1 if a == 1 else inv2)
+                    if inv > 0.0:
+                        b = min(int((cen[k, a] - clo[a]) * inv), n_bins - 1)
+                        bin_n[a, b] += 1
+                        bin_lo[a, b, 0] = min(bin_lo[a, b, 0], x0)
+                        bin_lo[a, b, 1] = min(bin_lo[a, b, 1], x1)
+                        bin_lo[a, b, 2] = min(bin_lo[a, b, 2], x2)
+                        bin_hi[a, b, 0] = max(bin_hi[a, b, 0], y0)
+                        bin_hi[a, b, 1] = max(bin_hi[a, b, 1], y1)
+                        bin_hi[a, b, 2] = max(bin_hi[a, b, 2], y2)
+            for a in range(3):
+                if chi[a] - clo[a] <= 0.0:
+                    continue
+                # Suffix sweep: area and count right of each boundary.
+                for c in range(3):
+                    acc_lo[c] = np.inf
+                    acc_hi[c] = -np.inf
+                acc_n = 0
+                for b in range(n_bins - 1, 0, -1):
+                    acc_n += bin_n[a, b]
+                    for c in range(3):
+                        acc_lo[c] = min(acc_lo[c], bin_lo[a, b, c])
+                        acc_hi[c] = max(acc_hi[c], bin_hi[a, b, c])
+                    right_n[b] = acc_n
+                    right_area[b] = _area(acc_lo, acc_hi) if acc_n > 0 else 0.0
+                # Prefix sweep; boundary b splits bins < b from bins >= b.
+                for c in range(3):
+                    acc_lo[c] = np.inf
+                    acc_hi[c] = -np.inf
+                acc_n = 0
+                for b in range(1, n_bins):
+                    acc_n += bin_n[a, b - 1]
+                    for c in range(3):
+                        acc_lo[c] = min(acc_lo[c], bin_lo[a, b - 1, c])
+                        acc_hi[c] = max(acc_hi[c], bin_hi[a, b - 1, c])
+                    if acc_n == 0 or right_n[b] == 0:
+                        continue
+                    cost = acc_n * _area(acc_lo, acc_hi) + right_n[b] * right_area[b]
+                    if cost < best_cost:
+                        best_cost = cost
+                        best_axis = a
+                        best_bin = b
+        split_cost = np.inf
+        if best_axis >= 0:
+            split_cost = C_TRAVERSAL + C_INTERSECT * best_cost / max(parent_area, 1e-300)
+        leaf_cost = C_INTERSECT * count
+        make_leaf = count < min_leaf_split or depth >= MAX_DEPTH or (
+            leaf_cost <= split_cost and count <= max_leaf)
+        if midpoint and count >= min_leaf_split and depth < MAX_DEPTH:
+            # The thesis's "plane division" (for comparison only): the middle of the
+            # centroid bounds' longest axis, leaves by size alone; SAH's choice only where
+            # the middle leaves one side empty.
+            a = 0
+            for c in range(1, 3):
+                if chi[c] - clo[c] > chi[a] - clo[a]:
+                    a = c
+            left = 0
+            for b in range(n_bins // 2):
+                left += bin_n[a, b]
+            if chi[a] - clo[a] > 0.0 and 0 < left < count:
+                best_axis = a
+                best_bin = n_bins // 2
+            make_leaf = count <= max_leaf or best_axis < 0
+        mid = start
+        known = 0
+        if not make_leaf:
+            if best_axis >= 0:
+                # Partition in place (bins < best_bin go left), the per-triangle arrays
+                # with the order; the children's centroid bounds on the way, their
+                # triangle bounds from the bins.
+                a = best_axis
+                scale = n_bins / (chi[a] - clo[a])
+                for q in range(2):
+                    for c in range(3):
+                        side_b[q, c] = np.inf
+                        side_b[q, 3 + c] = -np.inf
+                        side_b[q, 6 + c] = np.inf
+                        side_b[q, 9 + c] = -np.inf
+                i = start
+                j = end - 1
+                while i <= j:
+                    b = min(int((cen[i, a] - clo[a]) * scale), n_bins - 1)
+                    q = 0 if b < best_bin else 1
+                    for c in range(3):
+                        side_b[q, 6 + c] = min(side_b[q, 6 + c], cen[i, c])
+                        side_b[q, 9 + c] = max(side_b[q, 9 + c], cen[i, c])
+                    if q == 0:
+                        i += 1
+                    else:
+                        tmp = order[i]
+                        order[i] = order[j]
+                        order[j] = tmp
+                        for c in range(3):
+                            f = t_lo[i, c]
+                            t_lo[i, c] = t_lo[j, c]
+                            t_lo[j, c] = f
+                            f = t_hi[i, c]
+                            t_hi[i, c] = t_hi[j, c]
+                            t_hi[j, c] = f
+                            g = cen[i, c]
+                            cen[i, c] = cen[j, c]
+                            cen[j, c] = g
+                        j -= 1
+                mid = i
+                if binned:
+                    for b in range(n_bins):
+                        q = 0 if b < best_bin else 1
+                        for c in range(3):
+                            side_b[q, c] = min(side_b[q, c], bin_lo[a, b, c])
+                            side_b[q, 3 + c] = max(side_b[q, 3 + c], bin_hi[a, b, c])
+                    known = 1
+            else:
+                # All centroids coincide: no spatial split exists; halve the range so the
+                # leaves stay small (keeps the worst case bounded for degenerate input).
+                mid = start + count // 2
+        # Where this range's node lives: the root is node 0; others fill a parent slot.
+        if parent < 0:
+            node = 0
+            if make_leaf:
+                # A whole scene in one leaf: root with one leaf child and one empty child.
+                for c in range(3):
+                    box[0, BOX_CHILD0 + BOX_MIN + c] = lo[c]
+                    box[0, BOX_CHILD0 + BOX_MAX + c] = hi[c]
+                child[0, CHILD0_INDEX] = start
+                child[0, CHILD0_COUNT] = count
+                child[0, CHILD1_INDEX] = 0
+                child[0, CHILD1_COUNT] = CHILD_EMPTY
+                continue
+        else:
+            b = BOX_CHILD0 + BOX_STRIDE * side
+            for c in range(3):
+                box[parent, b + BOX_MIN + c] = lo[c]
+                box[parent, b + BOX_MAX + c] = hi[c]
+            k = CHILD_STRIDE * side
+            if make_leaf:
+                child[parent, k + CHILD_INDEX] = start
+                child[parent, k + CHILD_COUNT] = count
+                continue
+            node = n_nodes
+            n_nodes += 1
+            child[parent, k + CHILD_INDEX] = node
+            child[parent, k + CHILD_COUNT] = 0
+        # Children tasks: right first so the left subtree is built (and laid out) first.
+        for q in range(1, -1, -1):
+            tasks[n_tasks, 0] = mid if q == 1 else start
+            tasks[n_tasks, 1] = end if q == 1 else mid
+            tasks[n_tasks, 2] = node
+            tasks[n_tasks, 3] = q
+            tasks[n_tasks, 4] = depth + 1
+            tasks[n_tasks, 5] = known
+            if known:
+                for c in range(12):
+                    task_box[n_tasks, c] = side_b[q, c]
+            n_tasks += 1
+    return n_nodes, max_depth, n_deferred
+
+
+
+
+@njit(cache=jit_cache())
 def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split, midpoint):
+    """The tree, the triangle order, node count and depth. The per-triangle bounds and
+    centroids are copied and reordered along with ``order`` (the partitions swap them), so
+    every pass reads them in sequence; a node's bounds come with its task (from the
+    parent's bins and partition), so each range is read twice (bin, partition), not three
+    times. The top of the tree is built first; its subtrees of at least 1/16 of the
+    triangles are then built in parallel (_subtrees) and the nodes numbered as one
+    sequential build numbers them (_assemble): the tree is exactly that of the plain
+    formulation, _build_plain (tested)."""
+    n = tri_lo.shape[0]
+    order = np.arange(n).astype(np.int32)
+    if n == 0:
+        box = np.zeros((1, BOX_WIDTH), np.float32)
+        child = np.full((1, CHILD_WIDTH), CHILD_EMPTY, np.int32)
+        return box, child, order, 1, 0
+    t_lo = tri_lo.copy()
+    t_hi = tri_hi.copy()
+    cen = centroid.copy()
+    rows = 4 * STACK_SIZE + 8
+    tasks = np.zeros((rows, 6), np.int64)
+    task_box = np.zeros((rows, 12))
+    tasks[0, 1] = n
+    tasks[0, 2] = -1
+    box = np.zeros((max(1, n), BOX_WIDTH), np.float32)
+    child = np.full((max(1, n), CHILD_WIDTH), CHILD_EMPTY, np.int32)
+    defer = n // SUBTREE_FRACTION if n >= PARALLEL_MIN else 0
+    deferred = np.zeros((4 * SUBTREE_FRACTION + 8, 6), np.int64)
+    deferred_box = np.zeros((4 * SUBTREE_FRACTION + 8, 12))
+    n_top, depth, n_def = _run(t_lo, t_hi, cen, order, tasks, task_box, 1, box, child,
+                               n_bins, max_leaf, min_leaf_split, midpoint, defer, deferred,
+                               deferred_box)
+    if n_def == 0:
+        return box[:n_top].copy(), child[:n_top].copy(), order, n_top, depth
+    offsets = np.zeros(n_def + 1, np.int64)
+    for k in range(n_def):
+        offsets[k + 1] = offsets[k] + (deferred[k, 1] - deferred[k, 0])
+    sub_box = np.zeros((offsets[n_def], BOX_WIDTH), np.float32)
+    sub_child = np.full((offsets[n_def], CHILD_WIDTH), CHILD_EMPTY, np.int32)
+    sub_nodes = np.zeros(n_def, np.int64)
+    sub_depth = np.zeros(n_def, np.int64)
+    _subtrees(t_lo, t_hi, cen, order, deferred, deferred_box, n_def, offsets, sub_box,
+              sub_child, sub_nodes, sub_depth, n_bins, max_leaf, min_leaf_split, midpoint)
+    for k in range(n_def):
+        depth = max(depth, sub_depth[k])
+    out_box, out_child, total = _assemble(box, child, n_top, sub_box, sub_child, offsets,
+                                          sub_nodes)
+    return out_box, out_child, order, total, depth
+
+
+@njit(parallel=True, cache=jit_cache())
+def _subtrees(t_lo, t_hi, cen, order, deferred, deferred_box, n_def, offsets, sub_box,
+              sub_child, sub_nodes, sub_depth, n_bins, max_leaf, min_leaf_split, midpoint):
+    """Build each deferred subtree (disjoint triangle ranges) in parallel, subtree k into
+    rows offsets[k]... of sub_box/sub_child with its own node numbering (its root: 0)."""
+    for k in prange(n_def):
+        rows = 4 * STACK_SIZE + 8
+        tasks = np.zeros((rows, 6), np.int64)
+        task_box = np.zeros((rows, 12))
+        for c in range(6):
+            tasks[0, c] = deferred[k, c]
+        for c in range(12):
+            task_box[0, c] = deferred_box[k, c]
+        tasks[0, 2] = -1                       # the subtree's root: node 0 of its rows
+        lo = offsets[k]
+        hi = offsets[k + 1]
+        none = np.zeros((1, 6), np.int64)
+        none_box = np.zeros((1, 12))
+        nodes, depth, _ = _run(t_lo, t_hi, cen, order, tasks, task_box, 1, sub_box[lo:hi],
+                               sub_child[lo:hi], n_bins, max_leaf, min_leaf_split,
+                               midpoint, 0, none, none_box)
+        sub_nodes[k] = nodes
+        sub_depth[k] = depth
+
+
+@njit(cache=jit_cache())
+def _assemble(box, child, n_top, sub_box, sub_child, offsets, sub_nodes):
+    """One node array from the top tree and the subtrees, numbered in the order a
+    sequential build creates nodes: depth first, left child first (pre-order)."""
+    total = n_top
+    for k in range(sub_nodes.shape[0]):
+        total += sub_nodes[k]
+    out_box = np.zeros((total, BOX_WIDTH), np.float32)
+    out_child = np.full((total, CHILD_WIDTH), CHILD_EMPTY, np.int32)
+    # stack of (tree: -1 top or subtree k, node in that tree, output parent, side)
+    stack = np.zeros((4 * STACK_SIZE + 64, 4), np.int64)
+    stack[0, 0] = -1
+    stack[0, 1] = 0
+    stack[0, 2] = -1
+    n_stack = 1
+    n_out = 0
+    while n_stack > 0:
+        n_stack -= 1
+        tree = stack[n_stack, 0]
+        node = stack[n_stack, 1]
+        out_parent = stack[n_stack, 2]
+        side = stack[n_stack, 3]
+        me = n_out
+        n_out += 1
+        if out_parent >= 0:
+            out_child[out_parent, CHILD_STRIDE * side + CHILD_INDEX] = me
+            out_child[out_parent, CHILD_STRIDE * side + CHILD_COUNT] = 0
+        if tree < 0:
+            row_box = box[node]
+            row_child = child[node]
+        else:
+            row_box = sub_box[offsets[tree] + node]
+            row_child = sub_child[offsets[tree] + node]
+        for c in range(BOX_WIDTH):
+            out_box[me, c] = row_box[c]
+        # children: push right first, so the left subtree is numbered first
+        for q in range(1, -1, -1):
+            index = row_child[CHILD_STRIDE * q + CHILD_INDEX]
+            count = row_child[CHILD_STRIDE * q + CHILD_COUNT]
+            if count == DEFERRED:              # (top tree only) subtree `index`
+                stack[n_stack, 0] = index
+                stack[n_stack, 1] = 0
+            elif count == 0:                   # an inner node of the same tree
+                stack[n_stack, 0] = tree
+                stack[n_stack, 1] = index
+            else:                              # a leaf or an empty slot: copied
+                out_child[me, CHILD_STRIDE * q + CHILD_INDEX] = index
+                out_child[me, CHILD_STRIDE * q + CHILD_COUNT] = count
+                continue
+            stack[n_stack, 2] = me
+            stack[n_stack, 3] = q
+            n_stack += 1
+    return out_box, out_child, total
+
+
+@njit(cache=jit_cache())
+def _build_plain(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split, midpoint):
+    """The builder as first written (kept to test that the faster _build makes the same
+    tree)."""
     n = tri_lo.shape[0]
     order = np.arange(n).astype(np.int32)
     max_nodes = max(1, n)
@@ -234,7 +641,7 @@ def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split, midpoint)
     return box[:n_nodes].copy(), child[:n_nodes].copy(), order, n_nodes, max_depth
 
 
-def build_bvh(tri_verts, n_bins=16, max_leaf=8, split="sah"):
+def build_bvh(tri_verts, n_bins=16, max_leaf=8, split="sah", _plain=False):
     """Build a BVH over triangles ``tri_verts`` (float32, N x 3 x 3).
 
     ``split``: "sah" (binned SAH, the renderer's), or, for the benchmark's comparisons,
@@ -248,8 +655,9 @@ def build_bvh(tri_verts, n_bins=16, max_leaf=8, split="sah"):
     tri_hi = tri_verts.max(axis=1)
     centroid = 0.5 * (tri_lo.astype(np.float64) + tri_hi.astype(np.float64))
     min_leaf_split = len(tri_verts) + 1 if split == "none" else 2
-    box, child, order, _, depth = _build(tri_lo, tri_hi, centroid, int(n_bins), int(max_leaf),
-                                         min_leaf_split, split == "midpoint")
+    build = _build_plain if _plain else _build
+    box, child, order, _, depth = build(tri_lo, tri_hi, centroid, int(n_bins), int(max_leaf),
+                                        min_leaf_split, split == "midpoint")
     return BVH(_widen(box), child, order, int(depth))
 
 

@@ -108,8 +108,31 @@ class _Reader:
             return [float(self.numbers(el, self.attr(el, k, "0"), 1)[0]) for k in "xyz"]
         raise self.error(f"unsupported <{tag}>", el)
 
+    KINDS = {"int": ("integer",), "float": ("float", "integer"), "str": ("string",),
+             "bool": ("boolean",), "color": ("rgb", "spectrum", "float", "integer"),
+             "point": ("point", "vector")}
+
+    def get(self, p, name, kind, default=None):
+        """The value of parameter ``name`` of ``p`` (self.params), checked to be of
+        ``kind`` (int, float, str, bool, color, point); ``default`` when absent."""
+        if name not in p:
+            return default
+        tag, el = p[name]
+        if tag not in self.KINDS[kind]:
+            raise self.error(f"{name}: expected <{self.KINDS[kind][0]}>, got <{tag}>", el)
+        v = self.value(el)
+        if kind == "float":
+            return float(v)
+        if kind == "color" and tag in ("float", "integer"):
+            v = [float(v)] * 3
+        if kind == "color" and any(x < 0 for x in v):
+            raise self.error(f"{name}: negative colour component in {v}", el)
+        return v
+
     def transform(self, el):
         """The 4x4 matrix of a <transform>: its operations applied in order."""
+        if el.tag != "transform":
+            raise self.error(f"expected a <transform>, got <{el.tag}>", el)
         m = np.eye(4)
         for op in el:
             if op.tag == "translate":
@@ -275,14 +298,14 @@ def _integrator(r, el, render):
     if kind in ("path", "volpath"):
         if kind == "volpath":
             r.warn("volpath read as path (pt-render has no participating media)", el)
-        depth = r.value(p["max_depth"][1]) if "max_depth" in p else -1
+        depth = r.get(p, "max_depth", "int", -1)
         if depth == 0:
             raise r.error("max_depth 0 renders nothing", el)
         render["maxBounces"] = 64 if depth < 0 else depth - 1
         if depth < 0:
             r.warn("max_depth -1 (unbounded) read as 64 bounces", el)
         if "rr_depth" in p:
-            render["rrDepth"] = r.value(p["rr_depth"][1])
+            render["rrDepth"] = r.get(p, "rr_depth", "int")
         for k in p:
             if k not in ("max_depth", "rr_depth", "hide_emitters"):
                 r.warn(f"integrator parameter {k!r} ignored", el)
@@ -302,8 +325,8 @@ def _sensor(r, el, out):
     for child in el:
         if child.tag == "film":
             fp = r.params(child)
-            width = r.value(fp["width"][1]) if "width" in fp else width
-            height = r.value(fp["height"][1]) if "height" in fp else height
+            width = r.get(fp, "width", "int", width)
+            height = r.get(fp, "height", "int", height)
             for f in child:
                 if f.tag == "rfilter" and f.get("type") != "box":
                     r.warn(f"reconstruction filter {f.get('type')!r}: pt-render uses a box "
@@ -316,11 +339,11 @@ def _sensor(r, el, out):
         elif child.tag == "sampler":
             sp = r.params(child)
             if "sample_count" in sp:
-                out["render"]["spp"] = r.value(sp["sample_count"][1])
+                out["render"]["spp"] = r.get(sp, "sample_count", "int")
             if child.get("type") == "independent":
                 out["render"]["sampler"] = "independent"
             if "seed" in sp:
-                out["render"]["seed"] = r.value(sp["seed"][1])
+                out["render"]["seed"] = r.get(sp, "seed", "int")
     cam["resolution"] = [width, height]
     m = r.transform(p["to_world"][1]) if "to_world" in p else np.eye(4)
     origin = m[:3, 3]
@@ -338,8 +361,8 @@ def _sensor(r, el, out):
         raise r.error("focal_length: give fov (pt-render does not read Mitsuba's "
                       "focal-length strings)", p["focal_length"][1])
     # Mitsuba's default: a 50 mm lens on a 36 mm wide film
-    fov = r.value(p["fov"][1]) if "fov" in p else math.degrees(2 * math.atan(36 / 100))
-    axis = r.value(p["fov_axis"][1]) if "fov_axis" in p else "x"
+    fov = r.get(p, "fov", "float", math.degrees(2 * math.atan(36 / 100)))
+    axis = r.get(p, "fov_axis", "str", "x")
     t = math.tan(math.radians(fov) / 2)
     aspect = width / height
     if axis == "x":
@@ -355,8 +378,8 @@ def _sensor(r, el, out):
         raise r.error(f"fov_axis {axis!r}: expected x, y, diagonal, smaller or larger", el)
     cam["fov"] = math.degrees(2 * math.atan(tx))
     if kind == "thinlens":
-        radius = r.value(p["aperture_radius"][1]) if "aperture_radius" in p else 0.0
-        focus = r.value(p["focus_distance"][1]) if "focus_distance" in p else 0.0
+        radius = r.get(p, "aperture_radius", "float", 0.0)
+        focus = r.get(p, "focus_distance", "float", 0.0)
         if radius > 0:
             # the scene format's thin lens: radius = focalLength / (2 aperture), with the
             # focal length derived from fov and the default 36 mm sensor width
@@ -374,11 +397,11 @@ def _rgb_or_texture(r, el, tag_el):
         tp = r.params(v)
         if "filename" not in tp:
             raise r.error("bitmap without a filename", v)
-        spec = {"texture": r.value(tp["filename"][1])}
-        raw = r.value(tp["raw"][1]) if "raw" in tp else False
+        spec = {"texture": r.get(tp, "filename", "str")}
+        raw = r.get(tp, "raw", "bool", False)
         spec["colorSpace"] = "linear" if raw else "sRGB"
         if "filter_type" in tp:
-            ft = r.value(tp["filter_type"][1])
+            ft = r.get(tp, "filter_type", "str")
             spec["filter"] = "nearest" if ft == "nearest" else "bilinear"
         for k in tp:
             if k not in ("filename", "raw", "filter_type"):
@@ -386,7 +409,7 @@ def _rgb_or_texture(r, el, tag_el):
         return spec
     if tag == "ref":
         raise r.error("a texture given by <ref> is not supported: give it inline", v)
-    return r.value(v)
+    return r.get({"value": (tag, v)}, "value", "color")
 
 
 def _number(r, tag_el, what):
@@ -439,14 +462,13 @@ def _bsdf(r, el, name):
                          "specular_transmittance"))
         return mat
     if kind in ("conductor", "roughconductor"):
-        material = r.value(p["material"][1]) if "material" in p else "none"
+        material = r.get(p, "material", "str", "none")
         if material != "none" or "eta" in p or "k" in p:
             raise r.error(f"{kind} with a complex index of refraction (material "
                           f"{material!r}): not expressible exactly; use principled with "
                           "metallic 1 and the metal's colour as base_color", el)
         mat = {"name": name, "type": "principled", "metallic": 1.0, "roughness": 0.0,
-               "albedo": r.value(p["specular_reflectance"][1])
-               if "specular_reflectance" in p else 1.0}
+               "albedo": r.get(p, "specular_reflectance", "color", 1.0)}
         if kind == "roughconductor":
             mat["roughness"] = _roughness(r, el, p)
         _only(r, el, p, ("material", "alpha", "distribution", "specular_reflectance"))
@@ -468,17 +490,20 @@ def _ior(r, p, key, default):
         return default
     tag, v = p[key]
     if tag == "string":
-        name = r.value(v).lower()
+        name = r.get(p, key, "str").lower()
         if name not in IOR_NAMES:
             raise r.error(f"index of refraction {name!r}: not in pt-render's table "
                           f"({', '.join(sorted(IOR_NAMES))}); give a number", v)
         return IOR_NAMES[name]
-    return float(r.value(v))
+    eta = r.get(p, key, "float")
+    if not eta > 0:
+        raise r.error(f"{key}: an index of refraction must be > 0, got {eta}", v)
+    return eta
 
 
 def _roughness(r, el, p):
     """Mitsuba's GGX alpha -> the principled roughness (alpha = roughness^2)."""
-    if "distribution" in p and r.value(p["distribution"][1]) != "ggx":
+    if "distribution" in p and r.get(p, "distribution", "str") != "ggx":
         raise r.error("only the GGX microfacet distribution is supported", el)
     if "alpha_u" in p or "alpha_v" in p:
         raise r.error("anisotropic alpha_u/alpha_v: not supported here (principled's "
@@ -519,8 +544,8 @@ def _shape(r, el, out, materials):
     if kind in ("obj", "ply"):
         if "filename" not in p:
             raise r.error(f"{kind} shape without a filename", el)
-        obj["file"] = r.value(p["filename"][1])
-        face_normals = r.value(p["face_normals"][1]) if "face_normals" in p else False
+        obj["file"] = r.get(p, "filename", "str")
+        face_normals = r.get(p, "face_normals", "bool", False)
         obj["smooth"] = not face_normals
     elif kind == "rectangle":
         obj["vertices"] = [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]
@@ -529,8 +554,8 @@ def _shape(r, el, out, materials):
         obj["vertices"], obj["faces"] = _cube()
     elif kind == "sphere":
         from .geometry import uv_sphere
-        radius = r.value(p["radius"][1]) if "radius" in p else 1.0
-        center = r.value(p["center"][1]) if "center" in p else [0.0, 0.0, 0.0]
+        radius = r.get(p, "radius", "float", 1.0)
+        center = r.get(p, "center", "point", [0.0, 0.0, 0.0])
         v, f = uv_sphere(64, 128, 1.0)
         obj["vertices"], obj["faces"] = v.tolist(), f.tolist()
         obj["smooth"] = True
@@ -559,7 +584,7 @@ def _shape(r, el, out, materials):
                 raise r.error(f"a shape's emitter must be 'area', got {child.get('type')!r}",
                               child)
             ep = r.params(child)
-            emitter = r.value(ep["radiance"][1]) if "radiance" in ep else [1.0, 1.0, 1.0]
+            emitter = r.get(ep, "radiance", "color", [1.0, 1.0, 1.0])
     if bsdf_el is not None:
         name = _material_of(r, bsdf_el, out, materials)
     elif emitter is None:
@@ -601,26 +626,25 @@ def _emitter(r, el, out):
     kind = el.get("type")
     p = r.params(el)
     if kind == "point":
-        pos = r.value(p["position"][1]) if "position" in p else None
+        pos = r.get(p, "position", "point")
         if pos is None:
             m = r.transform(p["to_world"][1]) if "to_world" in p else np.eye(4)
             pos = m[:3, 3].tolist()
-        intensity = r.value(p["intensity"][1]) if "intensity" in p else [1.0, 1.0, 1.0]
+        intensity = r.get(p, "intensity", "color", [1.0, 1.0, 1.0])
         out.setdefault("lights", []).append({"type": "point", "position": pos,
                                              "intensity": intensity})
     elif kind == "constant":
         if "environment" in out:
             raise r.error("more than one environment emitter", el)
-        out["environment"] = {"color": r.value(p["radiance"][1]) if "radiance" in p
-                              else [1.0, 1.0, 1.0]}
+        out["environment"] = {"color": r.get(p, "radiance", "color", [1.0, 1.0, 1.0])}
     elif kind == "envmap":
         if "environment" in out:
             raise r.error("more than one environment emitter", el)
         if "filename" not in p:
             raise r.error("envmap without a filename", el)
-        env = {"file": r.value(p["filename"][1])}
+        env = {"file": r.get(p, "filename", "str")}
         if "scale" in p:
-            env["intensity"] = r.value(p["scale"][1])
+            env["intensity"] = r.get(p, "scale", "float")
         m = r.transform(p["to_world"][1]) if "to_world" in p else np.eye(4)
         # the scene format's map is Mitsuba's envmap turned 180 degrees about +Y
         # (pathtracer/mitsuba.py); any other turn about +Y adds to our rotation
