@@ -214,6 +214,12 @@ class _Handler(BaseHTTPRequestHandler):
             return self._send(404, b"not found", "text/plain")
         except (BrokenPipeError, ConnectionResetError):
             pass          # the browser went away
+        except Exception as e:     # a bug: one line to the browser, no traceback on the
+            try:                   # render's terminal (socketserver would print one)
+                self._send(500, f"pt-render preview: {type(e).__name__}: {e}".encode(),
+                           "text/plain")
+            except OSError:
+                pass
 
 
 PAGE = """<!doctype html>

@@ -109,6 +109,23 @@ def test_preview_binds_where_told_and_says_so():
         shared.close()
 
 
+def test_preview_error_is_one_line_not_a_traceback(capsys):
+    """An exception while answering (a bug) becomes a 500 with one line, and nothing is
+    printed on the render's terminal."""
+    from pathtracer.preview import PreviewServer
+    server = PreviewServer("127.0.0.1", 0)
+    try:
+        def broken(*args):
+            raise RuntimeError("boom")
+        server.image = broken
+        with pytest.raises(urllib.error.HTTPError) as e:
+            fetch(server.url + "image.png")
+        assert e.value.code == 500 and b"RuntimeError: boom" in e.value.read()
+    finally:
+        server.close()
+    assert "Traceback" not in capsys.readouterr().err
+
+
 @pytest.mark.skipif(shutil.which("chromium") is None and shutil.which("chromium-browser")
                     is None, reason="headless Chromium is not installed")
 def test_preview_page_in_a_browser(tmp_path):
