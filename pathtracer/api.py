@@ -23,6 +23,10 @@ from .scene.compile import CompileMemo, compile_scene
 from .scene.loader import SAMPLERS, TONEMAPS, describe, read_scene_data
 
 DICT_NAME = "<scene dict>"     # how error messages name a scene given as a dict
+# Paths in the first pass of a render without a callback, per backend: large enough that a
+# small GPU re-render is one launch (each pass costs a launch, a sum and a copy: ~1-2 ms),
+# small enough that Ctrl-C is answered within a fraction of a second.
+FIRST_PASS_PATHS = {"cuda": 1 << 20, "cpu": 1 << 17}
 
 
 # ---------------------------------------------------------------------------------------
@@ -209,20 +213,69 @@ class Scene:
         return backend, True
 
 
-def load_scene(source, allow_missing=False, base=None, _overrides=None, _check=None):
-    """A :class:`Scene` from a scene file's path (JSON, or a thesis renderer scene folder)
-    or from a dict in the same format (validated alike; relative file names in a dict are
-    read from ``base``, by default the current folder). Raises :class:`SceneError` with
-    the file and JSON path of what is wrong. (``_overrides``: resolution, sampler, exposure
-    or tonemap that replace the scene's, as the CLI's flags; ``_check(description)``: a
-    test run before compiling, such as the CLI's GPU memory check.)"""
+def load_scene(source, allow_missing=False, base=None, camera=None, environment=None,
+               _overrides=None, _check=None):
+    """A :class:`Scene` from a scene file's path (JSON, a glTF 2.0 model ``.gltf``/``.glb``,
+    a Mitsuba 3 XML scene, or a thesis renderer scene folder) or from a dict in the JSON
+    format (validated alike; relative file names in a dict are read from ``base``, by
+    default the current folder). Raises :class:`SceneError` with the file and JSON path of
+    what is wrong.
+
+    ``camera``: for a glTF model, which of its cameras: an index or a name, or "auto" (a
+    camera framing the model; the default when the file has none); for any scene, a dict
+    of camera keys (``{"position": ..., "lookAt": ...}``) that replace the scene's.
+    ``environment``: an environment map's path (or a dict of the format's environment
+    keys) that replaces the scene's environment, or "none" to remove it.
+
+    (``_overrides``: resolution, sampler, exposure or tonemap that replace the scene's, as
+    the CLI's flags; ``_check(description)``: a test run before compiling, such as the
+    CLI's GPU memory check.)"""
     if isinstance(source, dict):
-        return Scene(_plain(source), DICT_NAME, base=os.path.abspath(base or os.getcwd()),
+        data = _with_view(_plain(source), camera, environment, None)
+        return Scene(data, DICT_NAME, base=os.path.abspath(base or os.getcwd()),
                      _overrides=_overrides, _check=_check)
     if not isinstance(source, (str, os.PathLike)):
         raise TypeError(f"load_scene takes a path or a dict, not {type(source).__name__}")
-    data, path, warnings = read_scene_data(os.fspath(source), allow_missing)
+    source = os.fspath(source)
+    pick = camera if isinstance(camera, (str, int)) and not isinstance(camera, bool) else None
+    if pick is not None and not source.lower().endswith((".gltf", ".glb")):
+        raise SceneError(f"camera {pick!r}: choosing a camera by name or index is for glTF "
+                         "files (give camera keys as a dict)", source)
+    data, path, warnings = read_scene_data(source, allow_missing, camera=pick,
+                                           environment_given=environment is not None)
+    data = _with_view(data, None if pick is not None else camera, environment, path)
     return Scene(data, path, warnings=warnings, _overrides=_overrides, _check=_check)
+
+
+def _with_view(data, camera, environment, path):
+    """The scene data with the camera keys and environment given to load_scene."""
+    if camera is not None:
+        if not isinstance(camera, dict):
+            raise SceneError("camera: expected a dict of camera keys, a glTF camera's "
+                             f"index or name, or 'auto'; got {type(camera).__name__}",
+                             path or DICT_NAME)
+        cam = dict(data.get("camera") or {})
+        if "lookAt" in camera:
+            cam.pop("rotation", None)
+        if "rotation" in camera:
+            cam.pop("lookAt", None)
+        cam.update(camera)
+        data = dict(data, camera=cam)
+    if environment is not None:
+        data = dict(data)
+        if isinstance(environment, str) and environment.lower() == "none":
+            data.pop("environment", None)
+        elif isinstance(environment, (str, os.PathLike)):
+            env = os.path.abspath(os.fspath(environment))
+            if not os.path.isfile(env):
+                raise SceneError(f"environment map not found: {env}", path or DICT_NAME)
+            data["environment"] = {"file": env}
+        elif isinstance(environment, dict):
+            data["environment"] = environment
+        else:
+            raise SceneError("environment: expected a file path, a dict or 'none'",
+                             path or DICT_NAME)
+    return data
 
 
 # ---------------------------------------------------------------------------------------
@@ -420,9 +473,15 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
         return callback(p)
     if pass_seconds is None:
         pass_seconds = 0.25 if be.name == "cuda" else 0.5
+    first_pass = 1
+    if callback is None and time is None and spp is not None:
+        # Nobody sees the intermediate images: start with a pass of up to FIRST_PASS_PATHS
+        # paths (a power of 2 spp), so a small re-render is one or two launches, not log2(spp).
+        while first_pass * 2 <= spp and first_pass * 2 * pixels <= FIRST_PASS_PATHS.get(be.name, 0):
+            first_pass *= 2
     r = progressive(c, be, spp=spp, time_limit=time, seed=seed, max_bounces=max_bounces,
                     pass_seconds=pass_seconds, on_pass=on_pass if callback else None,
-                    adaptive=adaptive)
+                    adaptive=adaptive, first_pass=first_pass)
     r.compile_seconds = compile_seconds
     stopped = r.interrupted or r.stopped
     film = r.film

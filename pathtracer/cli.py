@@ -9,6 +9,7 @@ import contextlib
 import csv
 import math
 import os
+import re
 import signal
 import sys
 import tempfile
@@ -99,6 +100,28 @@ def _resolution(text):
     return w, h
 
 
+def _camera(text):
+    """--camera: 'auto', a glTF camera's index or name, or X,Y,Z[:X,Y,Z] (position and the
+    point looked at)."""
+    if re.fullmatch(r"\s*[-+.\deE]+\s*,\s*[-+.\deE]+\s*,\s*[-+.\deE]+\s*(:.*)?", text):
+        parts = text.split(":")
+        try:
+            vecs = [[float(x) for x in part.split(",")] for part in parts]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected X,Y,Z or X,Y,Z:X,Y,Z, got {text!r}") \
+                from None
+        if len(vecs) > 2 or any(len(v) != 3 or not all(map(math.isfinite, v)) for v in vecs):
+            raise argparse.ArgumentTypeError(f"expected X,Y,Z or X,Y,Z:X,Y,Z (finite), got "
+                                             f"{text!r}")
+        cam = {"position": vecs[0]}
+        if len(vecs) == 2:
+            cam["lookAt"] = vecs[1]
+        return cam
+    if not text.strip():
+        raise argparse.ArgumentTypeError("empty camera")
+    return text
+
+
 def build_parser():
     p = Parser(
         prog="pt-render",
@@ -107,8 +130,9 @@ def build_parser():
                     "SIGTERM or SIGHUP stop the render and keep what is done. Exit codes: 0 "
                     "done, 2 bad input, 3 an output could not be written, 128+N stopped by "
                     "signal N (the image saved), 1 a bug.")
-    p.add_argument("scene", help="scene file (JSON, see docs/scene-format.md; or a Mitsuba 3 "
-                   "XML scene, its common subset), or a thesis renderer scene folder")
+    p.add_argument("scene", help="scene file (JSON, see docs/scene-format.md; a glTF 2.0 "
+                   "model, .gltf or .glb; or a Mitsuba 3 XML scene, its common subset), or a "
+                   "thesis renderer scene folder")
     p.add_argument("-o", "--output", default=None,
                    help="output image; the extension picks the format: .png (8-bit sRGB, "
                         "with a lossless float .exr beside it), .hdr, .exr or .npy (float linear RGB). "
@@ -124,6 +148,14 @@ def build_parser():
                    help="random seed (default: the scene's)")
     p.add_argument("--resolution", type=_resolution, metavar="WxH",
                    help="override the camera resolution")
+    p.add_argument("--camera", type=_camera, metavar="CAMERA",
+                   help="X,Y,Z or X,Y,Z:X,Y,Z: the camera's position (and the point it looks "
+                        "at) for any scene; for a glTF model also one of its cameras by index "
+                        "or name, or 'auto' (framing the model: the default when the file has "
+                        "no camera)")
+    p.add_argument("--env", metavar="FILE",
+                   help="light the scene with this environment map (.hdr, .exr, ...) instead "
+                        "of its own environment ('none': no environment)")
     p.add_argument("--max-bounces", type=_integer(0, limits.MAX_BOUNCES),
                    help="override render.maxBounces")
     p.add_argument("--adaptive", type=_target, metavar="RELMSE",
@@ -413,7 +445,8 @@ def _render(args, signals):
 
     from .memory import check_film
     t0 = time.perf_counter()
-    scene = load_scene(scene_path, allow_missing=args.allow_missing,
+    scene = load_scene(scene_path, allow_missing=args.allow_missing, camera=args.camera,
+                       environment=args.env,
                        _overrides={"resolution": args.resolution, "sampler": args.sampler,
                                    "exposure": args.exposure, "tonemap": args.tonemap},
                        _check=lambda desc: check_film(*desc.camera.resolution, args.backend))

@@ -46,12 +46,14 @@ def error_estimate(film):
 
 
 def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=None,
-           rr_depth=None, pass_seconds=0.5, on_pass=None, adaptive=None):
+           rr_depth=None, pass_seconds=0.5, on_pass=None, adaptive=None, first_pass=1):
     """Render ``scene`` with ``backend`` until ``spp`` samples per pixel or ``time_limit``
     seconds, whichever comes first (spp defaults to the scene's unless a time is given).
 
-    Pass sizes start at 1 spp and double while a pass is shorter than ``pass_seconds``, so
-    the image refreshes quickly at first and overhead stays small later. ``on_pass(film,
+    Pass sizes start at ``first_pass`` spp (1: the image refreshes quickly at first; a
+    caller that shows no intermediate image starts larger, as each pass costs a launch and
+    a copy) and double while a pass is shorter than ``pass_seconds``, so overhead stays
+    small later. ``on_pass(film,
     elapsed)`` is called after every pass (returning False ends the render). Ctrl-C (or any :class:`~.errors.Interrupted`)
     stops the render and returns the samples of the passes completed (``interrupted`` and
     ``signal`` are set). A render never exceeds ``limits.MAX_SPP`` samples per pixel (the
@@ -74,7 +76,7 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
     backend.compile()
     compile_seconds = time.perf_counter() - t0
     result = RenderResult(film, 0.0, compile_seconds)
-    n = 2 if adaptive else 1
+    n = 2 if adaptive else max(1, int(first_pass))
     active = None
     start = time.perf_counter()
     try:

@@ -173,6 +173,12 @@ def test_cuda_set_and_rerender_without_compiling():
     second = pt.render(scene, spp=8, backend="cuda")
     assert second.compile_seconds == 0.0
     assert np.array_equal(second.image, 2 * first.image)
+    # only the arrays whose contents changed were uploaded again (the materials' table)
+    (be, _), = scene._backends.values()
+    kept = list(be.d_scene)
+    scene.set("/materials/light/emission", [8.0, 6.0, 4.0])     # the same value again
+    pt.render(scene, spp=1, backend="cuda")
+    assert all(a is b for a, b in zip(be.d_scene, kept))
     scene.set("/camera/position", [0.8, 1.4, 3.2])
     moved = pt.render(scene, spp=8, backend="cuda")
     assert moved.compile_seconds == 0.0 and not np.allclose(moved.image, second.image)
@@ -182,6 +188,17 @@ def test_cuda_set_and_rerender_without_compiling():
     assert np.isclose(moved.image.sum(), cpu.sum(), rtol=1e-2)
     close = np.isclose(moved.image, cpu, rtol=1e-3, atol=1e-3 * float(cpu.max())).all(-1)
     assert close.mean() > 0.99      # a rounding may flip a rare discrete decision
+
+
+def test_gpu_upload_skips_arrays_with_equal_contents():
+    """The GPU backend's re-upload test is bitwise: equal copies are kept, a sign of zero
+    or a dtype or shape change is not."""
+    from pathtracer.backends.cuda import _same
+    a = np.array([[0.0, 1.5], [2.0, 3.0]], np.float32)
+    assert _same(a, a) and _same(a, a.copy()) and _same(a.T.copy().T, a)
+    assert not _same(a, np.array([[-0.0, 1.5], [2.0, 3.0]], np.float32))
+    assert not _same(a, a.astype(np.float64)) and not _same(a, a.reshape(-1))
+    assert not _same(a, np.where(a == 3.0, np.nextafter(a, np.float32(4)), a))
 
 
 def test_python_api_doc(tmp_path, monkeypatch):

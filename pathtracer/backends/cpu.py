@@ -57,6 +57,7 @@ class CPUBackend:
         self.out = np.zeros((scene.height, scene.width, 3), np.float32)
         self.stats = np.zeros((scene.height, scene.width, 3), np.int32)
         self.all_pixels = np.ones((scene.height, scene.width), np.uint8)
+        self._compiled = False
 
     def update(self, scene):
         """Render ``scene`` from now on: the same features and image size (the Python
@@ -64,8 +65,10 @@ class CPUBackend:
         self.scene = scene
 
     def compile(self):
-        """Compile (or load from the disk cache) without rendering."""
-        self.render_pass(0, 0, 0, 0, 0)
+        """Compile (or load from the disk cache) without rendering; once per backend."""
+        if not self._compiled:
+            self.render_pass(0, 0, 0, 0, 0)
+            self._compiled = True
 
     def aovs(self, n_samples, seed):
         """The denoiser's albedo and normal images (float32 H x W x AOV_WIDTH, see aov_pixel)."""

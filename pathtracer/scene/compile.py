@@ -41,7 +41,7 @@ from .errors import SceneError
 from .geometry import safe_normalize, vertex_normals, vertex_tangents
 from .images import load_texture, read_image, srgb_to_linear
 from .loader import (EnvironmentMap, SceneDescription, TextureSpec, euler_matrix,
-                     load_scene_description)
+                     load_scene_description, scene_material)
 from .meshes import load_mesh
 from ..memory import TRIANGLE_BYTES, require
 
@@ -216,7 +216,8 @@ class MaterialTables:
         """The index of the texture of ``spec`` (loaded once); ``slot``: the parameter it
         feeds ('normalMap' allows negative texels; 'emission' and 'albedo' bound the
         texel x scale products, see limits)."""
-        key = (spec.path, spec.color_space, spec.filter, spec.tile, spec.offset, spec.scale)
+        key = (spec.path, spec.color_space, spec.filter, spec.tile, spec.offset, spec.scale,
+               spec.channel)
         if key not in self.textures:
             def load():
                 return load_texture(spec, self.scene_file, allow_negative=slot == "normalMap")
@@ -480,8 +481,13 @@ def _object_triangles(obj, desc, tables, mat_index, use_cache, memo=None):
     else:
         local = np.empty(len(mesh.materials) + 1, np.int32)
         for i, mm in enumerate(mesh.materials):
-            local[i] = obj_material(tables, mm, os.path.dirname(obj.file), desc.path,
-                                    f"{where}/file")
+            if mesh.material_format == "scene":      # glTF: scene-format materials
+                m = scene_material(mm, obj.file)
+                local[i] = tables.add(m.type, m.albedo, m.emission, m.two_sided, m.numbers,
+                                      m.textures, m.normal_map)
+            else:
+                local[i] = obj_material(tables, mm, os.path.dirname(obj.file), desc.path,
+                                        f"{where}/file")
         local[-1] = tables.default_material() if (mesh.face_material < 0).any() else 0
         mats = local[mesh.face_material]
     return pos, file_normals, uv, mats, seconds

@@ -79,6 +79,18 @@ def load_texture(spec, scene_file=None, allow_negative=False):
     require(h * w * TEXEL_BYTES, f"texture {spec.path} ({w}x{h})",
             "use a smaller texture", error=lambda m: SceneError(m, scene_file or spec.path,
                                                                 spec.pointer))
+    channel = getattr(spec, "channel", None)
+    if channel is not None:
+        n = img.shape[2]
+        if n <= 2:                 # grey (+ alpha): r, g and b are the grey
+            src = 0 if channel != "a" else (1 if n == 2 else None)
+        else:
+            src = "rgba".index(channel) if "rgba".index(channel) < n else None
+        if src is None:            # no alpha channel: opaque
+            top = np.iinfo(img.dtype).max if img.dtype.kind in "ui" else 1.0
+            img = np.full(img.shape[:2] + (1,), top, img.dtype)
+        else:
+            img = img[:, :, src:src + 1]
     img = _rgb(img)
     _check_values(img, spec.path, spec.pointer, scene_file, allow_negative)
     if img.dtype.kind in "ui" and img.dtype.itemsize <= 2:

@@ -60,6 +60,7 @@ class TextureSpec:
     offset: tuple = (0.0, 0.0)
     scale: tuple = (1.0, 1.0, 1.0)
     pointer: str = ""
+    channel: Optional[str] = None    # "r", "g", "b" or "a": one channel of the image
 
 
 # principled number parameters: scene key -> (default, lo, hi), from the one parameter
@@ -330,12 +331,18 @@ def _strict_json(path):
         raise SceneError(f"invalid JSON{where}: {e}", path) from None
 
 
-def read_scene_data(path, allow_missing=False):
+def read_scene_data(path, allow_missing=False, camera=None, environment_given=False):
     """(parsed JSON in this format, the scene file's absolute path, warnings) of a scene
-    file, a Mitsuba 3 XML scene or a thesis renderer's scene folder (converted); not yet
-    validated."""
+    file, a Mitsuba 3 XML scene, a glTF 2.0 model or a thesis renderer's scene folder
+    (converted); not yet validated. ``camera``: which of a glTF file's cameras;
+    ``environment_given``: a glTF file gets no default environment (see
+    :func:`.gltf.convert_file`)."""
     from .thesis import convert, is_thesis_folder, is_thesis_scene_file
     path = os.path.abspath(path)
+    if path.lower().endswith((".gltf", ".glb")) and not os.path.isdir(path):
+        from .gltf import convert_file as convert_gltf
+        data, warnings = convert_gltf(path, camera, environment_given)
+        return data, path, warnings
     if path.lower().endswith(".xml") and not os.path.isdir(path):
         from .mitsuba_xml import convert_file
         data, warnings = convert_file(path)
@@ -535,6 +542,14 @@ def _material(n, base):
     return m
 
 
+def scene_material(data, file):
+    """A Material from a dict in this format made by a model reader (glTF): validated as a
+    scene file's material; its errors name ``file`` and the dict's ``_pointer``."""
+    data = dict(data)
+    pointer = data.pop("_pointer", "")
+    return _material(Node(data, pointer, file), os.path.dirname(os.path.abspath(file)))
+
+
 def _color_or_texture(n, key, default, base, color_space, material, slot, hi):
     if not n.has(key):
         return default
@@ -573,6 +588,7 @@ def _texture_spec(n, key, base, color_space):
             warnings.warn(f"{n.file}: {t.path('filter')}: trilinear filtering needs "
                           "mip-maps, not built yet: filtered bilinearly", stacklevel=2)
             spec.filter = "bilinear"
+        spec.channel = t.string("channel", None, choices=("r", "g", "b", "a"))
         spec.tile = _pair(t, "tile", (1.0, 1.0))
         spec.offset = _pair(t, "offset", (0.0, 0.0))
         if t.has("scale"):
@@ -617,9 +633,9 @@ def _object(n, base, materials):
         if not os.path.isfile(obj.file):
             raise n.error(f"file not found: {obj.file}", "file")
         ext = os.path.splitext(obj.file)[1].lower()
-        if ext not in (".obj", ".ply"):
-            raise n.error(f"unsupported mesh format {ext!r}: this version reads OBJ (.obj) "
-                          "and PLY (.ply); glTF is not supported yet", "file")
+        if ext not in (".obj", ".ply", ".gltf", ".glb"):
+            raise n.error(f"unsupported mesh format {ext!r}: this version reads OBJ (.obj), "
+                          "PLY (.ply) and glTF 2.0 (.gltf, .glb)", "file")
     elif n.has("vertices") and n.has("faces"):
         obj.vertices = _array(n, "vertices", float, 3)
         obj.faces = _array(n, "faces", int, 3)
@@ -636,7 +652,9 @@ def _object(n, base, materials):
         raise n.error(f"unknown material {obj.material!r}", "material")
     if n.has("transform"):
         obj.matrix = _transform(n.node("transform"))
-    obj.smooth = n.boolean("smooth", False)
+    # glTF meshes carry their shading normals: smooth unless told otherwise
+    obj.smooth = n.boolean("smooth", obj.file is not None and
+                           os.path.splitext(obj.file)[1].lower() in (".gltf", ".glb"))
     n.finish()
     return obj
 

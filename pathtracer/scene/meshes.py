@@ -30,6 +30,9 @@ class ObjMesh:
     face_material: np.ndarray      # int32 (F,): index into materials, -1 = no material
     materials: list                # dicts: name, Kd, Ke, Ks, Ns, Ni, Pr, Pm, map_Kd, map_Bump
     from_cache: bool = False
+    # "mtl": materials are .mtl dicts (above); "scene": materials in the JSON scene format
+    # (glTF files), read as a scene file's
+    material_format: str = "mtl"
 
 
 def cache_dir():
@@ -54,16 +57,21 @@ def _cache_key(path, data):
     return h.hexdigest()
 
 
-MESH_FORMATS = (".obj", ".ply")
+MESH_FORMATS = (".obj", ".ply", ".gltf", ".glb")
 
 # PLY vertex properties read as texture coordinates, the first pair present wins
 PLY_UV_NAMES = (("s", "t"), ("u", "v"), ("texture_u", "texture_v"), ("texture_s", "texture_t"))
 
 
 def load_mesh(path, use_cache=True):
-    """Triangles (and, for OBJ, materials) of the mesh file at ``path`` by its extension."""
-    if os.path.splitext(path)[1].lower() == ".ply":
+    """Triangles (and, for OBJ and glTF, materials) of the mesh file at ``path`` by its
+    extension."""
+    ext = os.path.splitext(path)[1].lower()
+    if ext == ".ply":
         return load_ply(path)
+    if ext in (".gltf", ".glb"):
+        from .gltf import load_gltf_mesh
+        return load_gltf_mesh(path)
     return load_obj(path, use_cache=use_cache)
 
 
