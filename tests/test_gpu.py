@@ -56,8 +56,9 @@ def test_no_float64_in_ptx():
 
 
 def _full_feature_scene(tmp_path):
-    """Every kernel feature at once: principled materials with textures and a normal map,
-    emissive triangles, a point light, an HDRI, smooth normals and a thin lens."""
+    """Every kernel feature at once: principled materials with textures (mirrored and
+    clamped) and a normal map, emissive triangles, a point light, an HDRI, smooth normals
+    and a thin lens."""
     import imageio.v3 as iio
 
     from pathtracer.film import write_image
@@ -75,8 +76,8 @@ def _full_feature_scene(tmp_path):
                    "aperture": 8, "focusDistance": 5},
         "render": {"maxBounces": 6, "rrDepth": 2},
         "materials": [
-            {"name": "floor", "albedo": "a.png", "roughness": 0.4, "normalMap": "n.png",
-             "anisotropic": 0.5},
+            {"name": "floor", "albedo": {"texture": "a.png", "wrap": ["mirror", "clamp"]},
+             "roughness": 0.4, "normalMap": "n.png", "anisotropic": 0.5},
             {"name": "glass", "transmission": 1, "roughness": 0.1, "eta": 1.5,
              "clearcoat": 0.5, "sheen": 0.3},
             {"name": "lamp", "type": "diffuse", "albedo": 0, "emission": 4}],

@@ -1,4 +1,5 @@
-"""OBJ loading through pywavefront and the content-keyed mesh cache."""
+"""OBJ loading (tinyobjloader for the geometry, pywavefront for the .mtl) and the
+content-keyed mesh cache."""
 import os
 
 import numpy as np
@@ -55,3 +56,56 @@ def test_file_normals_and_smooth(tmp_path):
     n = s.arrays.tri_n[:s.n_triangles].reshape(-1, 3, 3)
     assert np.allclose(np.linalg.norm(n, axis=2), 1, atol=1e-5)
     assert s.n_triangles == 968
+
+
+def test_tinyobjloader_numpy_accessors_match_its_lists(tmp_path):
+    """The stride fix-up of tinyobjloader's numpy accessors (meshes._numpy) reads what its
+    list accessors give, on a file with normals, texture coordinates and two materials."""
+    import tinyobjloader
+    from pathtracer.scene.meshes import _numpy
+    obj = tmp_path / "t.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0.5\nvt 0 0\nvt 1 0\nvt 1 1\n"
+                   "vn 0 0 1\nvn 0 1 0\nusemtl a\nf 1/1/1 2/2/1 3/3/2\nusemtl b\n"
+                   "f 1/1/2 3/3/1 4/2/2\n")
+    r = tinyobjloader.ObjReader()
+    assert r.ParseFromFile(str(obj), tinyobjloader.ObjReaderConfig())
+    a = r.GetAttrib()
+    assert np.array_equal(_numpy(a.numpy_vertices()), a.vertices)
+    assert np.array_equal(_numpy(a.numpy_normals()), a.normals)
+    assert np.array_equal(_numpy(a.numpy_texcoords()), a.texcoords)
+    m = r.GetShapes()[0].mesh
+    corners = _numpy(m.numpy_indices()).reshape(-1, 3)
+    assert np.array_equal(corners[:, 0], m.vertex_indices())
+    assert np.array_equal(corners[:, 1], m.normal_indices())
+    assert np.array_equal(corners[:, 2], m.texcoord_indices())
+    assert np.array_equal(_numpy(m.numpy_material_ids()), m.material_ids)
+
+
+def test_faces_mixing_index_forms(tmp_path):
+    """v, v/vt, v//vn and v/vt/vn faces in one material: per-corner texture coordinates
+    where given ((0, 0) elsewhere); normals only if every corner has one."""
+    obj = tmp_path / "m.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0.25 0.5\nvt 1 0\nvt 1 1\n"
+                   "vn 0 0 1\nf 1/1 2/2 3/3\nf 1 3 4\nf 1//1 2//1 3//1\n")
+    m = load_obj(str(obj), use_cache=False)
+    assert m.positions.shape == (3, 3, 3) and m.normals is None
+    assert np.allclose(m.uvs[0], [[0.25, 0.5], [1, 0], [1, 1]]) and not m.uvs[1:].any()
+
+
+def test_malformed_vertex_lines_are_refused(tmp_path):
+    """tinyobjloader reads 'nan', 'inf', words and missing numbers as 0: refused by name
+    and line instead (indented lines too)."""
+    import pytest
+    from pathtracer.scene import SceneError
+    for body, line, words in (("v 0 0 0\nv 1 nan 0\n", 2, "other than numbers"),
+                              ("v 0 0 0\nvn 0 0 -inf\n", 2, "other than numbers"),
+                              ("# x\nv 0 0 0\n\n  v 1 zz 0\n", 4, "other than numbers"),
+                              ("v 0 0 0\nv 1 0\n", 2, "too few"),
+                              ("v 0 0 0\nvt\n", 2, "too few")):
+        obj = tmp_path / "bad.obj"
+        obj.write_text(body + "v 1 1 1\nf 1 2 3\n")
+        with pytest.raises(SceneError, match=f"line {line}: .*{words}"):
+            load_obj(str(obj), use_cache=False)
+    # numbers in every legal spelling are accepted
+    obj.write_text("v -1.5e+2 +0.25 .5\nv 1E-3 2. 0\r\nv 0 1 0 1.0\nf 1 2 3\n")
+    assert np.allclose(load_obj(str(obj), use_cache=False).positions[0, 0], [-150, 0.25, 0.5])

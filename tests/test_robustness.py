@@ -235,11 +235,11 @@ def test_mtl_values_are_checked(tmp_path, capsys, mtl, key):
 
 
 @pytest.mark.parametrize("obj,message", [
-    ("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nf 1/1 2/2 3/3\nf 1 3 4\n",
-     "one form per material"),
+    ("v 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n", "too few numbers"),
+    ("v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2\n", "fewer than 3 vertices"),
     ("v 0 0 0\nv 1 0 0\nv 1 1 0\nvt 0 0\nf 1/1 2/2 3/3\n", "out of range"),
     ("v 0 0 0\nv 1 0 0\nv 1 1 0\nf 0 1 2\n", "out of range"),
-    ("v 0 0 zz\nf 1 2 3\n", "invalid OBJ"),
+    ("v 0 0 zz\nf 1 2 3\n", "line 1: a vertex line with something other than numbers"),
 ])
 def test_obj_problems_are_named(tmp_path, capsys, obj, message):
     (tmp_path / "m.obj").write_text(obj)

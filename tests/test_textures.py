@@ -29,10 +29,10 @@ def test_srgb_decode_is_exact_piecewise():
     assert abs(srgb_to_linear(0.5) - 0.5 ** 2.2) > 1e-3      # not a 2.2 power
 
 
-def _tex(img, filt=0, tile=(1, 1), offset=(0, 0), scale=(1, 1, 1)):
+def _tex(img, filt=0, tile=(1, 1), offset=(0, 0), scale=(1, 1, 1), wrap=0):
     h, w = img.shape[:2]
     data = img.reshape(-1, 3).astype(F)
-    ti = np.array([[0, w, h, filt]], np.int32)
+    ti = np.array([[0, w, h, filt, wrap]], np.int32)
     tf = np.array([[*tile, *offset, *scale]], F)
     return lambda u, v: np.array(tex_lookup(data, ti, tf, 0, F(u), F(v)))
 
@@ -54,6 +54,33 @@ def test_bilinear_nearest_wrap_tile_orientation():
     tiled = _tex(img, filt=1, tile=(2, 1), offset=(0.25, 0), scale=(2, 1, 1))
     # u' = 2 u + 0.25 -> 0.25 + 0.25 = 0.5 -> texel 2 of the bottom row (7), scaled by 2
     assert tiled(0.125, 0.25)[0] == pytest.approx(14)
+
+
+def test_wrap_modes_mirror_and_clamp():
+    """glTF's sampler modes per axis (layout.TEX_WRAP: u in bits 0-1, v in bits 2-3)."""
+    from pathtracer.kernels.layout import WRAP_CLAMP, WRAP_MIRROR
+    img = np.zeros((2, 4, 3))
+    img[0, :, 0] = [1, 2, 3, 4]
+    img[1, :, 0] = [5, 6, 7, 8]
+    clamp = _tex(img, wrap=WRAP_CLAMP | (WRAP_CLAMP << 2))
+    assert clamp(0.0, 0.25)[0] == pytest.approx(5)           # the edge texel, no wrap
+    assert clamp(-3.0, 0.25)[0] == pytest.approx(5) and clamp(7.5, 0.25)[0] == pytest.approx(8)
+    assert clamp(0.125, -2.0)[0] == pytest.approx(5) and clamp(0.125, 3.0)[0] == pytest.approx(1)
+    mirror = _tex(img, wrap=WRAP_MIRROR | (WRAP_MIRROR << 2))
+    assert mirror(1.125, 0.25)[0] == pytest.approx(8)        # 2 - 1.125 = 0.875: texel 3
+    assert mirror(-0.125, 0.25)[0] == pytest.approx(5)       # mirrored about 0
+    assert mirror(2.125, 0.25)[0] == pytest.approx(5)        # period 2
+    assert mirror(0.125, 1.25)[0] == pytest.approx(1)        # v mirrored: the top row
+    nearest = _tex(img, filt=1, wrap=WRAP_MIRROR)            # u mirrored, v repeats
+    assert nearest(1.3, 1.25)[0] == 7 and nearest(0.3, 0.25)[0] == 6
+    # the same lookups, compiled
+    from numba import njit
+    h, w = img.shape[:2]
+    data = img.reshape(-1, 3).astype(F)
+    ti = np.array([[0, w, h, 0, WRAP_MIRROR | (WRAP_CLAMP << 2)]], np.int32)
+    tf = np.array([[1, 1, 0, 0, 1, 1, 1]], F)
+    lookup = njit(lambda u, v: tex_lookup(data, ti, tf, 0, u, v))
+    assert lookup(F(1.125), F(3.0))[0] == pytest.approx(4)
 
 
 def _quad_scene(tmp_path, material, res=(8, 8), uv_flip=False):

@@ -178,13 +178,17 @@ TEX_FIRST = 0         # index of the first texel in tex_data
 TEX_WIDTH = 1
 TEX_HEIGHT = 2
 TEX_FILTER = 3        # FILTER_BILINEAR or FILTER_NEAREST
-TEX_INT_WIDTH = 4
+TEX_WRAP = 4          # u's WRAP_* in bits 0-1, v's in bits 2-3
+TEX_INT_WIDTH = 5
 TEX_TILE = 0          # u, v
 TEX_OFFSET = 2        # u, v
 TEX_SCALE = 4         # r, g, b
 TEX_F_WIDTH = 7
 FILTER_BILINEAR = 0
 FILTER_NEAREST = 1
+WRAP_REPEAT = 0
+WRAP_CLAMP = 1        # clamp to the edge texels
+WRAP_MIRROR = 2       # mirrored repeat
 
 # ---- BVH: node k holds both children (Aila & Laine 2009) ---------------------------------------
 # bvh_box, float32 (B, BOX_WIDTH): child c's box starts at BOX_CHILD0 + c * BOX_STRIDE and
@@ -251,6 +255,7 @@ class Features(NamedTuple):
     env_map: bool = False      # an HDRI environment (importance sampled)
     thin_lens: bool = False    # aperture > 0
     sobol: bool = False        # Owen-scrambled Sobol sampler (else independent)
+    wrap_modes: bool = False   # a texture that mirrors or clamps (else all repeat)
 
 
 class Specialisation(NamedTuple):
@@ -272,6 +277,7 @@ class Specialisation(NamedTuple):
     fold: bool             # shading normals differ from geometric ones: fold lobes back
     lean: bool             # Lambertian and flat shading only: the cheapest path
     sobol: bool            # the Owen-scrambled Sobol sampler
+    wrap_modes: bool       # texture wrap modes other than repeat
 
 
 def specialise(features):
@@ -286,7 +292,8 @@ def specialise(features):
         any_environment=f.environment or f.env_map, nee=any_lights or f.env_map,
         smooth=f.smooth, principled=f.principled, textures=f.textures,
         normal_map=normal_map, tangents=f.tangents, thin_lens=f.thin_lens, fold=fold,
-        lean=not f.principled and not fold, sobol=f.sobol)
+        lean=not f.principled and not fold, sobol=f.sobol,
+        wrap_modes=f.wrap_modes and f.textures)
 
 
 class SceneArrays(NamedTuple):

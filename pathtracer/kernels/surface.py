@@ -21,7 +21,7 @@ from .layout import (M_ALBEDO, M_ANISOTROPIC, M_CLEARCOAT, M_CLEARCOAT_GLOSS, M_
                      TRI_N0, TRI_N1, TRI_N2, TRI_T0, TRI_T1, TRI_T2, TRI_T_SIGN, TRI_UV0,
                      TRI_UV1, TRI_UV2, specialise)
 from .normalmap import clamp_mapped_normal, mapped_normal_seeing
-from .textures import tex_lookup
+from .textures import make_tex_lookup
 from .vec import (add, cross, dot, frame, load3, luminance, madd, max_abs, neg, normalize,
                   scale)
 
@@ -97,6 +97,7 @@ def make_surface(features, target="cpu"):
     SMOOTH = S.smooth
     TANGENTS = S.tangents
     NORMAL_MAP = S.normal_map
+    tex_lookup = make_tex_lookup(S.wrap_modes)
 
     @step
     def param1(mat, mat_tex, tex_data, tex_int, tex_f, m, slot, col, u, v):

@@ -32,7 +32,8 @@ from ..kernels.layout import (CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_LENS_Y, CA
                               M_ALBEDO, M_ANISOTROPIC, M_EMISSION, M_ETA, M_TWO_SIDED, M_TYPE,
                               MAT_DIFFUSE, MAT_PRINCIPLED, MAT_WIDTH, MATERIAL_PARAMS,
                               N_SLOTS, NO_TEXTURE, PL_INTENSITY, PL_POSITION, PL_WIDTH,
-                              T_ALBEDO, T_EMISSION, T_NORMAL, TEX_F_WIDTH, TEX_FILTER,
+                              T_ALBEDO, T_EMISSION, T_NORMAL, TEX_F_WIDTH, TEX_FILTER, TEX_WRAP,
+                              WRAP_CLAMP, WRAP_MIRROR, WRAP_REPEAT,
                               TEX_FIRST, TEX_HEIGHT, TEX_INT_WIDTH, TEX_OFFSET, TEX_SCALE,
                               TEX_TILE, TEX_WIDTH, TRI_E1, TRI_E2, TRI_N_WIDTH, TRI_T0,
                               TRI_T_SIGN, TRI_T_WIDTH, TRI_UV_WIDTH, TRI_V0, TRI_V_WIDTH,
@@ -138,7 +139,8 @@ def compile_scene(desc, use_cache=True, bvh_options=None, memo=None):
         environment=env.constant, smooth=tri.smooth, principled=tables.any_principled,
         textures=use_textures, normal_map=tables.any_normal_map and use_textures,
         tangents=use_tangents, env_map=env.has_map, thin_lens=desc.camera.lens_radius > 0,
-        sobol=desc.render.sampler == "sobol")
+        sobol=desc.render.sampler == "sobol",
+        wrap_modes=use_textures and any(p[4] != ("repeat", "repeat") for p in tables.tex_params))
     cam = camera_array(desc.camera, tri.shift)
     if not (np.isfinite(cam).all() and np.abs(cam).max() <= limits.FLOAT32_MAX):
         raise SceneError("the camera's numbers overflow float32 (position, fov, aperture or "
@@ -217,7 +219,7 @@ class MaterialTables:
         feeds ('normalMap' allows negative texels; 'emission' and 'albedo' bound the
         texel x scale products, see limits)."""
         key = (spec.path, spec.color_space, spec.filter, spec.tile, spec.offset, spec.scale,
-               spec.channel)
+               spec.channel, spec.wrap)
         if key not in self.textures:
             def load():
                 return load_texture(spec, self.scene_file, allow_negative=slot == "normalMap")
@@ -232,7 +234,8 @@ class MaterialTables:
                                  self.scene_file, spec.pointer)
             self.textures[key] = len(self.tex_images)
             self.tex_images.append(img)
-            self.tex_params.append((spec.filter, spec.tile, spec.offset, spec.scale))
+            self.tex_params.append((spec.filter, spec.tile, spec.offset, spec.scale,
+                                    spec.wrap))
         return self.textures[key]
 
     def default_material(self):
@@ -302,8 +305,10 @@ class MaterialTables:
         if tex_data.shape[0] >= 2 ** 31:
             raise SceneError("textures too large (more than 2^31 texels in all)",
                              self.scene_file)
-        for i, (im, (filt, tile, offset, scale)) in enumerate(zip(self.tex_images,
-                                                                   self.tex_params)):
+        wraps = {"repeat": WRAP_REPEAT, "clamp": WRAP_CLAMP, "mirror": WRAP_MIRROR}
+        for i, (im, (filt, tile, offset, scale, wrap)) in enumerate(zip(self.tex_images,
+                                                                         self.tex_params)):
+            tex_int[i, TEX_WRAP] = wraps[wrap[0]] | (wraps[wrap[1]] << 2)
             tex_int[i, TEX_FIRST] = offs[i]
             tex_int[i, TEX_WIDTH] = im.shape[1]
             tex_int[i, TEX_HEIGHT] = im.shape[0]
@@ -469,7 +474,13 @@ def _object_triangles(obj, desc, tables, mat_index, use_cache, memo=None):
     t0 = time.perf_counter()
 
     def read():
-        mesh = load_mesh(obj.file, use_cache=use_cache)
+        try:
+            mesh = load_mesh(obj.file, use_cache=use_cache)
+        except SceneError as e:
+            if e.pointer or e.file != obj.file:
+                raise
+            # the scene's key too, not only the mesh file
+            raise SceneError(f"{obj.file}: {e.message}", desc.path, f"{where}/file") from None
         return (mesh, mesh.positions.astype(np.float64),
                 mesh.normals.astype(np.float64) if mesh.normals is not None else None,
                 mesh.uvs.astype(np.float64) if mesh.uvs is not None else None)

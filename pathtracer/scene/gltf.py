@@ -40,7 +40,8 @@ WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "M
 # sampler constants
 NEAREST = 9728
 REPEAT, CLAMP_TO_EDGE, MIRRORED_REPEAT = 10497, 33071, 33648
-WRAP_NAMES = {CLAMP_TO_EDGE: "CLAMP_TO_EDGE", MIRRORED_REPEAT: "MIRRORED_REPEAT"}
+WRAP_MODES = {None: "repeat", REPEAT: "repeat", CLAMP_TO_EDGE: "clamp",
+              MIRRORED_REPEAT: "mirror"}
 # primitive modes
 POINTS, LINES, LINE_LOOP, LINE_STRIP, TRIANGLES, TRIANGLE_STRIP, TRIANGLE_FAN = range(7)
 
@@ -510,10 +511,15 @@ class GltfModel:
             s = g.samplers[tex.sampler]
             if s.magFilter == NEAREST:
                 spec["filter"] = "nearest"
+            modes = []
             for axis, mode in (("wrapS", s.wrapS), ("wrapT", s.wrapT)):
-                if mode not in (None, REPEAT):
-                    self.warn(f"/samplers/{tex.sampler}: {axis} "
-                              f"{WRAP_NAMES.get(mode, mode)} not supported (repeats)")
+                if mode not in WRAP_MODES:
+                    raise self.error(f"{axis} {mode}: expected 10497 (REPEAT), 33071 "
+                                     "(CLAMP_TO_EDGE) or 33648 (MIRRORED_REPEAT)",
+                                     f"/samplers/{tex.sampler}/{axis}")
+                modes.append(WRAP_MODES[mode])
+            if modes != ["repeat", "repeat"]:
+                spec["wrap"] = modes
         if ext:
             su, sv = (float(x) for x in ext.get("scale", [1, 1]))
             ou, ov = (float(x) for x in ext.get("offset", [0, 0]))

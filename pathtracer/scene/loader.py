@@ -61,6 +61,7 @@ class TextureSpec:
     scale: tuple = (1.0, 1.0, 1.0)
     pointer: str = ""
     channel: Optional[str] = None    # "r", "g", "b" or "a": one channel of the image
+    wrap: tuple = ("repeat", "repeat")   # u, v: "repeat", "mirror" or "clamp"
 
 
 # principled number parameters: scene key -> (default, lo, hi), from the one parameter
@@ -589,6 +590,16 @@ def _texture_spec(n, key, base, color_space):
                           "mip-maps, not built yet: filtered bilinearly", stacklevel=2)
             spec.filter = "bilinear"
         spec.channel = t.string("channel", None, choices=("r", "g", "b", "a"))
+        if t.has("wrap"):
+            w = t.raw("wrap")
+            modes = ("repeat", "mirror", "clamp")
+            if isinstance(w, str) and w in modes:
+                spec.wrap = (w, w)
+            elif isinstance(w, list) and len(w) == 2 and all(x in modes for x in w):
+                spec.wrap = tuple(w)
+            else:
+                raise t.error("expected 'repeat', 'mirror' or 'clamp', or [u, v] of them",
+                              "wrap")
         spec.tile = _pair(t, "tile", (1.0, 1.0))
         spec.offset = _pair(t, "offset", (0.0, 0.0))
         if t.has("scale"):

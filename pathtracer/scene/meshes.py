@@ -1,5 +1,5 @@
-"""Mesh files: OBJ, read with pywavefront and cached on disk keyed by file content, and PLY
-(ASCII or binary), read with plyfile (fast enough not to need the cache).
+"""Mesh files: OBJ, read with tinyobjloader (its .mtl with pywavefront) and cached on disk
+keyed by file content, PLY (ASCII or binary), read with plyfile, and glTF (scene.gltf).
 
 A cached mesh is an ``.npz`` of unindexed triangles (positions, optional normals) and a
 per-face material index, with the .mtl material table beside it as JSON. The key is the
@@ -19,7 +19,7 @@ import numpy as np
 
 from .errors import SceneError
 
-CACHE_VERSION = 5
+CACHE_VERSION = 6
 
 
 @dataclass
@@ -48,7 +48,7 @@ def _cache_key(path, data):
     h.update(os.path.dirname(os.path.abspath(path)).encode())
     h.update(data)
     # The .mtl files change the material table: hash them too.
-    for m in re.findall(rb"^[ \t]*mtllib[ \t]+(.+?)[ \t]*$", data, re.M):
+    for m in mtllibs(data):
         mtl = os.path.join(os.path.dirname(path), m.decode("utf-8", "replace"))
         h.update(m)
         if os.path.isfile(mtl):
@@ -144,7 +144,7 @@ def load_obj(path, use_cache=True):
             return _read_cache(cpath)
         except Exception:   # a damaged cache entry is re-made, never trusted
             pass
-    mesh = _parse(path)
+    mesh = _parse(path, data)
     if use_cache:
         _write_cache(cpath, mesh)
     return mesh
@@ -176,111 +176,267 @@ def _write_cache(cpath, mesh):
         warn(f"mesh cache not written ({e.strerror or e}); the mesh will be parsed again next run")
 
 
-def _parse(path):
-    import pywavefront
-    logging.getLogger("pywavefront").setLevel(logging.ERROR)
+def _parse(path, data=None):
+    """An OBJ's triangles through tinyobjloader (C++: 1.6M triangles in ~1.5 s where
+    pywavefront, pure Python, took 15-28 s), its .mtl materials through pywavefront.
+
+    tinyobjloader reads a malformed coordinate (NaN and infinity included) as 0 without a
+    word: :func:`_check_vertex_lines` refuses those first. Its numpy accessors need a
+    fix-up: :func:`_numpy`."""
+    import tinyobjloader
+    if data is None:
+        try:
+            with open(path, "rb") as f:
+                data = f.read()
+        except OSError as e:
+            raise SceneError(f"cannot read: {e.strerror}", path) from None
+    _check_vertex_lines(data, path)
+    reader = tinyobjloader.ObjReader()
+    config = tinyobjloader.ObjReaderConfig()
+    # polygons are fanned here, from their first vertex (as pywavefront and Blender):
+    # tinyobjloader would split a quad along its shorter diagonal
+    config.triangulate = False
+    if not reader.ParseFromFile(path, config):
+        error = " ".join(reader.Error().split())
+        line = re.search(r"[Ll]ine (\d+)", error)
+        where = f" (line {line.group(1)})" if line else ""
+        if "`f' line" in error:
+            raise SceneError(f"a face refers to a vertex index that is out of range or 0"
+                             f"{where}", path)
+        raise SceneError(f"invalid OBJ: {error or 'unreadable'}", path)
+    warning = reader.Warning()
+    if "Degenerated face" in warning:
+        raise SceneError("a face has fewer than 3 vertices", path)
+    attrib = reader.GetAttrib()
+    with np.errstate(over="ignore"):        # > float32 range: inf, refused later
+        v = _numpy(attrib.numpy_vertices()).astype(np.float32).reshape(-1, 3)
+        vn = _numpy(attrib.numpy_normals()).astype(np.float32).reshape(-1, 3)
+        vt = _numpy(attrib.numpy_texcoords()).astype(np.float32).reshape(-1, 2)
+    del attrib
+    vi, ni, ti, mat_ids = [], [], [], []
+    for shape in reader.GetShapes():
+        m = shape.mesh
+        corners = _numpy(m.numpy_indices()).reshape(-1, 3)   # vertex, normal, texcoord
+        ids = _numpy(m.numpy_material_ids())
+        if len(corners) != 3 * len(ids):
+            # polygons (faces of fewer than 3 vertices were refused above, so 3 corners
+            # per face means triangles only). numpy_num_face_vertices copies 4 bytes per
+            # 1-byte count: the list is read
+            sizes = np.array(m.num_face_vertices, np.int64)
+            if len(sizes) != len(ids) or sizes.sum() != len(corners) or sizes.min() < 3:
+                raise SceneError("invalid OBJ: a face has fewer than 3 vertices", path)
+            corners, ids = _fan(corners, ids, sizes)
+        vi.append(corners[:, 0].copy())
+        ni.append(corners[:, 1].copy())
+        ti.append(corners[:, 2].copy())
+        mat_ids.append(np.array(ids, np.int32))
+        del corners
+    tiny_materials = [mm.name for mm in reader.GetMaterials()]
+    del reader
+    if not vi:
+        return ObjMesh(np.zeros((0, 3, 3), np.float32), None, None, np.zeros(0, np.int32), [])
+    def joined(parts):
+        return parts[0] if len(parts) == 1 else np.concatenate(parts)
+    vi, ni, ti, mat_ids = joined(vi), joined(ni), joined(ti), joined(mat_ids)
+    for idx, table, what in ((vi, v, "vertex"), (ni, vn, "normal"),
+                             (ti, vt, "texture coordinate")):
+        if len(idx) and (idx.max() >= len(table) or (idx.min() < 0 and what == "vertex")):
+            raise SceneError(f"a face refers to a {what} index that is out of range", path)
+    if "out of bounds" in warning or "out of range" in warning:
+        # (an index of 0, or negative past the start, which the reader leaves out)
+        raise SceneError("a face refers to a vertex index that is out of range", path)
+    positions = _gather(v, vi).reshape(-1, 3, 3)
+    del vi
+    normals = _gather(vn, ni).reshape(-1, 3, 3) if len(ni) and ni.min() >= 0 else None
+    uvs = None
+    if len(ti) and ti.max() >= 0:
+        # corners without vt: (0, 0), so that the faces that have them keep theirs (a
+        # textured material on faces without vt is refused by the compiler)
+        uvs = np.where((ti >= 0)[:, None], vt[np.maximum(ti, 0)] if len(vt) else 0.0,
+                       0.0).astype(np.float32).reshape(-1, 3, 2)
+    materials, face_mat = _obj_materials(path, data, tiny_materials, mat_ids, warning)
+    return ObjMesh(positions, normals, uvs, face_mat, materials)
+
+
+def _numpy(array):
+    """An array from one of tinyobjloader's numpy accessors. Each is a fresh contiguous
+    array that the binding fills with memcpy (py::array_t<T>(n)), but the 2.0.0rc13 wheels
+    report a stride of 0 under NumPy 2, so every element reads as the first: the stride is
+    set back to the item size (tests/test_meshes.py checks these against the list
+    accessors)."""
+    if array.ndim == 1 and len(array) > 1 and array.strides[0] == 0:
+        array = np.lib.stride_tricks.as_strided(array, array.shape, (array.itemsize,),
+                                                writeable=False)
+    return array
+
+
+def _fan(corners, ids, sizes):
+    """Polygons (corner rows, sizes) as triangle fans (0, k, k + 1), and their materials."""
+    first = np.concatenate(([0], np.cumsum(sizes)[:-1]))
+    n_tri = sizes - 2
+    face = np.repeat(np.arange(len(sizes)), n_tri)
+    k = np.arange(len(face)) - np.repeat(np.cumsum(n_tri) - n_tri, n_tri)
+    rows = np.stack([first[face], first[face] + k + 1, first[face] + k + 2], -1).reshape(-1)
+    return corners[rows], ids[face]
+
+
+def _gather(table, idx):
+    """table[idx] for rows of a float32 table, gathered as whole rows (as one void item:
+    1.7x faster than fancy indexing of a 2-D array)."""
+    rows = np.ascontiguousarray(table).view(np.dtype((np.void, table.shape[1] * 4))).reshape(-1)
+    return rows[idx].view(np.float32).reshape(-1, table.shape[1])
+
+
+# The bytes a coordinate may contain (digits, sign, point, exponent) and separators
+_NUMBER_BYTES = np.zeros(256, bool)
+_NUMBER_BYTES[np.frombuffer(b"0123456789+-.eE \t\r\n", np.uint8)] = True
+_SPACE = np.zeros(256, bool)
+_SPACE[np.frombuffer(b" \t\r\n", np.uint8)] = True
+# tokens a vertex line needs, keyword included: v x y z, vn x y z, vt u
+_MIN_TOKENS = np.array([0, 4, 4, 2], np.int32)
+_CHUNK = 1 << 24
+
+
+def _check_vertex_lines(data, path):
+    """Every v, vn and vt line holds only numbers, enough of them. tinyobjloader reads a
+    malformed coordinate ('zz', 'nan', 'inf', a missing one) as 0 without a word; this
+    check, vectorised over 16 MB chunks of whole lines, refuses such a file instead (0.2 s
+    for 60 MB)."""
+    arr = np.frombuffer(data, np.uint8)
+    begin, line_base = 0, 0
+    while begin < len(arr):
+        end = min(len(arr), begin + _CHUNK)
+        if end < len(arr):
+            nl = data.rfind(b"\n", begin, end)
+            end = nl + 1 if nl >= begin else len(arr)
+        line_base = _check_chunk(arr[begin:end], data, begin, line_base, path)
+        begin = end
+
+
+def _check_chunk(chunk, data, offset, line_base, path):
+    is_nl = chunk == 10
+    starts = np.flatnonzero(is_nl) + 1
+    starts = np.concatenate(([0], starts[starts < len(chunk)]))
+    n_lines = int(len(starts))
+    first = chunk[starts]
+    second = chunk[np.minimum(starts + 1, len(chunk) - 1)]
+    kind = np.where(first != ord("v"), 0,
+                    np.where(second == ord("n"), 2, np.where(second == ord("t"), 3,
+                                                             np.where(_SPACE[second], 1, 0))))
+    for i in np.flatnonzero((first == 32) | (first == 9)):    # indented lines: rare
+        line = bytes(chunk[starts[i]:starts[i + 1] if i + 1 < n_lines else len(chunk)])
+        _check_line(line.strip(), line_base + i + 1, path)
+    vlines = np.flatnonzero(kind)
+    if not len(vlines):
+        return line_base + n_lines
+    # only the span from the first to the last vertex line (they come in blocks)
+    lo = int(starts[vlines[0]])
+    hi = int(starts[vlines[-1] + 1]) if vlines[-1] + 1 < n_lines else len(chunk)
+    span = chunk[lo:hi]
+    ok = _NUMBER_BYTES[span]
+    ok[starts[vlines] - lo] = True                              # the keyword: v
+    two = vlines[kind[vlines] >= 2]
+    ok[np.minimum(starts[two] + 1 - lo, len(span) - 1)] = True  # vn, vt
+    bad = np.flatnonzero(~ok) + lo
+    if len(bad):
+        line = np.searchsorted(starts, bad, side="right") - 1
+        hit = kind[line] > 0
+        if hit.any():
+            i = int(line[int(np.argmax(hit))])
+            raise SceneError(f"line {line_base + i + 1}: a vertex line with something other "
+                             "than numbers (NaN and infinity included)", path)
+    space = _SPACE[span]
+    token = ~space
+    token[1:] &= space[:-1]
+    count = np.concatenate(([0], np.cumsum(token, dtype=np.int32)))
+    ends = np.append(starts[1:], len(chunk))
+    v_lo, v_hi = starts[vlines] - lo, ends[vlines] - lo
+    short = count[v_hi] - count[v_lo] < _MIN_TOKENS[kind[vlines]]
+    if short.any():
+        i = int(vlines[int(np.argmax(short))])
+        raise SceneError(f"line {line_base + i + 1}: a vertex line with too few numbers",
+                         path)
+    return line_base + n_lines
+
+
+def _check_line(line, number, path):
+    parts = line.split()
+    if not parts or parts[0] not in (b"v", b"vn", b"vt"):
+        return
+    need = {b"v": 3, b"vn": 3, b"vt": 1}[parts[0]]
     try:
-        scene = pywavefront.Wavefront(path, collect_faces=True, create_materials=True,
-                                      parse=True)
-    except (IndexError, ValueError) as e:
-        if _mixed_face_forms(path):
-            raise SceneError("faces of one material mix the forms v, v/vt, v//vn and "
-                             "v/vt/vn; the OBJ reader (pywavefront) needs one form per "
-                             "material: export with UVs and normals on every face",
-                             path) from None
-        if isinstance(e, IndexError):
-            raise SceneError("a face refers to a vertex, normal or texture coordinate "
-                             "index that is out of range", path) from None
-        raise SceneError(f"invalid OBJ: {e}", path) from None
-    except FileNotFoundError as e:
-        raise SceneError(f"file not found: {e.filename or e}", path) from None
-    except Exception as e:   # pywavefront reports malformed lines with various types
-        raise SceneError(f"invalid OBJ: {e}", path) from None
-    for m in scene.mesh_list:
-        if m.faces and min(min(f) for f in m.faces) < 0:
-            raise SceneError("a face refers to a vertex index that is out of range", path)
-    positions, normals, uvs, face_mat, materials = [], [], [], [], []
-    all_have_normals = True
-    any_uvs = any("T2F" in m.vertex_format for m in scene.materials.values() if m.vertices)
-    extra = _mtl_extras(path)
-    for mat in scene.materials.values():
-        if not mat.vertices:
+        values = [float(x) for x in parts[1:]]
+    except ValueError:
+        values = None
+    if values is None or not all(np.isfinite(values)):
+        raise SceneError(f"line {number}: a vertex line with something other than numbers "
+                         "(NaN and infinity included)", path)
+    if len(values) < need:
+        raise SceneError(f"line {number}: a vertex line with too few numbers", path)
+
+
+def _obj_materials(path, data, names, mat_ids, warning):
+    """The .mtl materials of the faces' material ids (tinyobjloader's, by name) with their
+    values as pywavefront reads them, and each face's index into that list (-1: none)."""
+    import pywavefront.material
+    logging.getLogger("pywavefront").setLevel(logging.ERROR)
+    parsed = {}
+    for lib in mtllibs(data):
+        mtl = os.path.join(os.path.dirname(path), lib.decode("utf-8", "replace"))
+        if not os.path.isfile(mtl):
             continue
-        fmt = mat.vertex_format.split("_")
-        sizes = {"T2F": 2, "C3F": 3, "N3F": 3, "V3F": 3}
-        offsets, stride = {}, 0
-        for part in fmt:
-            offsets[part] = stride
-            stride += sizes[part]
-        if len(mat.vertices) % (3 * stride):
-            # pywavefront leaves out the value of an index past the end of its list
-            raise SceneError("a face refers to a texture coordinate or normal index that is "
-                             "out of range, or a face has fewer than 3 vertices", path)
-        with np.errstate(over="ignore"):     # > float32 range: inf, refused later
-            v = np.asarray(mat.vertices, dtype=np.float32).reshape(-1, stride)
-        o = offsets["V3F"]
-        positions.append(v[:, o:o + 3].reshape(-1, 3, 3))
-        if "N3F" in offsets:
-            o = offsets["N3F"]
-            normals.append(v[:, o:o + 3].reshape(-1, 3, 3))
+        try:
+            parsed.update(pywavefront.material.MaterialParser(mtl).materials)
+        except Exception as e:     # pywavefront reports malformed lines with various types
+            raise SceneError(f"invalid .mtl file {mtl}: {e}", path) from None
+    extra = _mtl_extras(path, data)
+    used = np.unique(mat_ids[mat_ids >= 0])
+    materials = []
+    local = np.full(len(names) + 1, -1, np.int32)
+    for i in used:
+        name = names[i]
+        mat = parsed.get(name)
+        if mat is None:
+            materials.append({"undefined": True, "name": name})
         else:
-            all_have_normals = False
-        if "T2F" in offsets:
-            o = offsets["T2F"]
-            uvs.append(v[:, o:o + 2].reshape(-1, 3, 2))
-        else:
-            # faces of a material without vt: (0, 0), so that the other materials keep
-            # theirs (a textured material without vt is refused by the compiler)
-            uvs.append(np.zeros((len(v) // 3, 3, 2), np.float32))
-        # pywavefront names faces without `usemtl` "default<N>"; those get no material.
-        index = -1 if (mat.is_default and re.fullmatch(r"default\d+", mat.name)) else len(materials)
-        if index >= 0:
             materials.append({
-                # usemtl of a material no .mtl defines: an error only where the scene
-                # does not give the object a material of its own
-                "undefined": bool(mat.is_default),
-                "name": mat.name, "Kd": list(mat.diffuse[:3]), "Ke": list(mat.emissive[:3]),
+                "undefined": False,
+                "name": name, "Kd": list(mat.diffuse[:3]), "Ke": list(mat.emissive[:3]),
                 "Ks": list(mat.specular[:3]), "Ns": float(mat.shininess),
                 "Ni": float(mat.optical_density),
-                "Pr": extra.get(mat.name, {}).get("Pr"), "Pm": extra.get(mat.name, {}).get("Pm"),
+                "Pr": extra.get(name, {}).get("Pr"), "Pm": extra.get(name, {}).get("Pm"),
                 "map_Kd": mat.texture.path if mat.texture else None,
                 "map_Bump": (mat.texture_bump.path if mat.texture_bump else
-                             extra.get(mat.name, {}).get("norm"))})
-        face_mat.append(np.full(len(v) // 3, index, np.int32))
-    if not positions:
-        return ObjMesh(np.zeros((0, 3, 3), np.float32), None, None, np.zeros(0, np.int32), [])
-    return ObjMesh(np.concatenate(positions),
-                   np.concatenate(normals) if all_have_normals and normals else None,
-                   np.concatenate(uvs) if any_uvs else None,
-                   np.concatenate(face_mat), materials)
+                             extra.get(name, {}).get("norm"))})
+        local[i] = len(materials) - 1
+    # usemtl of a material no .mtl defines (tinyobjloader warns, and gives its faces the
+    # previous material): an error only where the scene gives the object no material
+    for name in dict.fromkeys(re.findall(r"material \[ '(.*?)' \] not found", warning)):
+        materials.append({"undefined": True, "name": name})
+    return materials, local[np.where(mat_ids >= 0, mat_ids, len(names))]
 
 
-def _mixed_face_forms(path):
-    """Do the face lines of ``path`` use more than one index form (v, v/vt, v//vn,
-    v/vt/vn)? Only to explain a failure of the reader."""
-    forms = set()
-    try:
-        with open(path, "rb") as f:
-            for line in f:
-                if line.startswith(b"f ") or line.startswith(b"f\t"):
-                    for token in line.split()[1:]:
-                        parts = token.split(b"/")
-                        forms.add((len(parts) > 1 and parts[1] != b"", len(parts) > 2))
-    except OSError:
-        return False
-    return len(forms) > 1
+def mtllibs(data):
+    """The .mtl names of an OBJ's ``mtllib`` lines (as bytes). The lines are found by
+    substring search: a multi-line regular expression over a 60 MB file takes 0.1 s."""
+    out = []
+    pos = data.find(b"mtllib")
+    while pos >= 0:
+        start = data.rfind(b"\n", 0, pos) + 1
+        end = data.find(b"\n", pos)
+        line = data[start:end if end >= 0 else len(data)]
+        m = re.fullmatch(rb"[ \t]*mtllib[ \t]+(.+?)[ \t\r]*", line)
+        if m:
+            out.append(m.group(1))
+        pos = data.find(b"mtllib", pos + 6)
+    return out
 
 
-def _mtl_extras(path):
+def _mtl_extras(path, data):
     """PBR keys of the .mtl files that pywavefront does not read: Pr (roughness), Pm
     (metallic) and norm (normal map), per material name."""
     out = {}
-    try:
-        with open(path, "rb") as f:
-            libs = re.findall(rb"^[ \t]*mtllib[ \t]+(.+?)[ \t]*$", f.read(), re.M)
-    except OSError:
-        return out
-    for lib in libs:
+    for lib in mtllibs(data):
         mtl = os.path.join(os.path.dirname(path), lib.decode("utf-8", "replace"))
         try:
             with open(mtl, "r", encoding="utf-8", errors="replace") as f:
