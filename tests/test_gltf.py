@@ -344,8 +344,10 @@ def test_gltf_object_in_a_json_scene(tmp_path):
     s = pt.load_scene(scene, base=str(tmp_path))
     c = s.compiled
     # tri_v rows: the first vertex, then two edges; the quad lies at z = -1 + 2
-    z = c.arrays.tri_v[:, 2] + c.origin_shift[2]
-    assert np.allclose(z, 1.0, atol=1e-5) and np.allclose(c.arrays.tri_v[:, 5], 0, atol=1e-6)
+    from pathtracer.kernels import layout as L
+    z = c.arrays.tri_v[:, L.TRI_V0 + 2] + c.origin_shift[2]
+    assert np.allclose(z, 1.0, atol=1e-5)
+    assert np.allclose(c.arrays.tri_v[:, [L.TRI_E1 + 2, L.TRI_E2 + 2]], 0, atol=1e-6)
     assert c.features.smooth          # the file's normals (glTF objects: smooth)
     red = pt.render(s, spp=4, backend="cpu", aovs=True).aovs["albedo"][8, 8]
     assert np.allclose(red, [1, 0, 0], atol=1e-3)
