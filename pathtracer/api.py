@@ -240,7 +240,8 @@ def load_scene(source, allow_missing=False, base=None, camera=None, environment=
     pick = camera if isinstance(camera, (str, int)) and not isinstance(camera, bool) else None
     if pick is not None and not source.lower().endswith((".gltf", ".glb")):
         raise SceneError(f"camera {pick!r}: choosing a camera by name or index is for glTF "
-                         "files (give camera keys as a dict)", source)
+                         "files; other scenes take a position (--camera X,Y,Z[:X,Y,Z], or "
+                         "a dict of camera keys in Python)", source)
     data, path, warnings = read_scene_data(source, allow_missing, camera=pick,
                                            environment_given=environment is not None)
     data = _with_view(data, None if pick is not None else camera, environment, path)
@@ -268,7 +269,8 @@ def _with_view(data, camera, environment, path):
         elif isinstance(environment, (str, os.PathLike)):
             env = os.path.abspath(os.fspath(environment))
             if not os.path.isfile(env):
-                raise SceneError(f"environment map not found: {env}", path or DICT_NAME)
+                raise SceneError(f"environment map not found: {env} (given to replace the "
+                                 "scene's environment)", path or DICT_NAME)
             data["environment"] = {"file": env}
         elif isinstance(environment, dict):
             data["environment"] = environment

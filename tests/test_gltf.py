@@ -381,6 +381,12 @@ def test_cli_renders_a_glb_with_camera_and_env_flags(tmp_path):
                          capture_output=True, text=True, cwd=ROOT)
     assert run.returncode == 2 and "no such camera" in run.stderr
     assert run.stderr.count("\n") == 1
+    box = os.path.join(ROOT, "scenes", "cornell-box.json")
+    for flags, words in ((["--camera", "front"], "is for glTF files"),
+                         (["--env", str(tmp_path / "none.hdr")], "environment map not found")):
+        run = subprocess.run([sys.executable, "-m", "pathtracer", box, *flags, "--quiet",
+                              "-o", str(out)], capture_output=True, text=True, cwd=ROOT)
+        assert run.returncode == 2 and words in run.stderr and run.stderr.count("\n") == 1
 
 
 def _paths(doc, prefix=()):
