@@ -44,73 +44,6 @@ def _area(lo, hi):
     return 2.0 * (dx * dy + dy * dz + dz * dx)
 
 
-@njit(cache=jit_cache(), inline="always")
-def _choose_split(bin_n, bin_lo, bin_hi, clo, chi, n_bins, count, depth, parent_area,
-                  max_leaf, min_leaf_split, midpoint, acc_lo, acc_hi, right_n, right_area):
-    """The SAH choice for a node whose centroids are binned in ``bin_*`` (when count >=
-    min_leaf_split and depth < MAX_DEPTH): (axis, boundary bin, whether to make a leaf);
-    axis -1: no split. Shared by the builder and its plain formulation, which differ only
-    in how they bin and move triangles. ``acc_*``, ``right_*``: scratch."""
-    best_cost = np.inf
-    best_axis = -1
-    best_bin = 0
-    if count >= min_leaf_split and depth < MAX_DEPTH:
-        for a in range(3):
-            if chi[a] - clo[a] <= 0.0:
-                continue
-            # Suffix sweep: area and count right of each boundary.
-            for c in range(3):
-                acc_lo[c] = np.inf
-                acc_hi[c] = -np.inf
-            acc_n = 0
-            for b in range(n_bins - 1, 0, -1):
-                acc_n += bin_n[a, b]
-                for c in range(3):
-                    acc_lo[c] = min(acc_lo[c], bin_lo[a, b, c])
-                    acc_hi[c] = max(acc_hi[c], bin_hi[a, b, c])
-                right_n[b] = acc_n
-                right_area[b] = _area(acc_lo, acc_hi) if acc_n > 0 else 0.0
-            # Prefix sweep; boundary b splits bins < b from bins >= b.
-            for c in range(3):
-                acc_lo[c] = np.inf
-                acc_hi[c] = -np.inf
-            acc_n = 0
-            for b in range(1, n_bins):
-                acc_n += bin_n[a, b - 1]
-                for c in range(3):
-                    acc_lo[c] = min(acc_lo[c], bin_lo[a, b - 1, c])
-                    acc_hi[c] = max(acc_hi[c], bin_hi[a, b - 1, c])
-                if acc_n == 0 or right_n[b] == 0:
-                    continue
-                cost = acc_n * _area(acc_lo, acc_hi) + right_n[b] * right_area[b]
-                if cost < best_cost:
-                    best_cost = cost
-                    best_axis = a
-                    best_bin = b
-    split_cost = np.inf
-    if best_axis >= 0:
-        split_cost = C_TRAVERSAL + C_INTERSECT * best_cost / max(parent_area, 1e-300)
-    leaf_cost = C_INTERSECT * count
-    make_leaf = count < min_leaf_split or depth >= MAX_DEPTH or (
-        leaf_cost <= split_cost and count <= max_leaf)
-    if midpoint and count >= min_leaf_split and depth < MAX_DEPTH:
-        # The thesis's "plane division" (for comparison only): the middle of the
-        # centroid bounds' longest axis, leaves by size alone; SAH's choice only where
-        # the middle leaves one side empty.
-        a = 0
-        for c in range(1, 3):
-            if chi[c] - clo[c] > chi[a] - clo[a]:
-                a = c
-        left = 0
-        for b in range(n_bins // 2):
-            left += bin_n[a, b]
-        if chi[a] - clo[a] > 0.0 and 0 < left < count:
-            best_axis = a
-            best_bin = n_bins // 2
-        make_leaf = count <= max_leaf or best_axis < 0
-    return best_axis, best_bin, make_leaf
-
-
 @njit(cache=jit_cache())
 def _run(t_lo, t_hi, cen, order, tasks, task_box, n_tasks, box, child, n_bins, max_leaf,
          min_leaf_split, midpoint, defer, deferred, deferred_box):
@@ -198,6 +131,9 @@ def _run(t_lo, t_hi, cen, order, tasks, task_box, n_tasks, box, child, n_bins, m
                     clo[a] = min(clo[a], cen[k, a])
                     chi[a] = max(chi[a], cen[k, a])
         # Find the best binned split.
+        best_cost = np.inf
+        best_axis = -1
+        best_bin = 0
         parent_area = _area(lo, hi)
         binned = False
         if count >= min_leaf_split and depth < MAX_DEPTH:
@@ -229,9 +165,59 @@ def _run(t_lo, t_hi, cen, order, tasks, task_box, n_tasks, box, child, n_bins, m
                         bin_hi[a, b, 0] = max(bin_hi[a, b, 0], y0)
                         bin_hi[a, b, 1] = max(bin_hi[a, b, 1], y1)
                         bin_hi[a, b, 2] = max(bin_hi[a, b, 2], y2)
-        best_axis, best_bin, make_leaf = _choose_split(
-            bin_n, bin_lo, bin_hi, clo, chi, n_bins, count, depth, parent_area, max_leaf,
-            min_leaf_split, midpoint, acc_lo, acc_hi, right_n, right_area)
+            for a in range(3):
+                if chi[a] - clo[a] <= 0.0:
+                    continue
+                # Suffix sweep: area and count right of each boundary.
+                for c in range(3):
+                    acc_lo[c] = np.inf
+                    acc_hi[c] = -np.inf
+                acc_n = 0
+                for b in range(n_bins - 1, 0, -1):
+                    acc_n += bin_n[a, b]
+                    for c in range(3):
+                        acc_lo[c] = min(acc_lo[c], bin_lo[a, b, c])
+                        acc_hi[c] = max(acc_hi[c], bin_hi[a, b, c])
+                    right_n[b] = acc_n
+                    right_area[b] = _area(acc_lo, acc_hi) if acc_n > 0 else 0.0
+                # Prefix sweep; boundary b splits bins < b from bins >= b.
+                for c in range(3):
+                    acc_lo[c] = np.inf
+                    acc_hi[c] = -np.inf
+                acc_n = 0
+                for b in range(1, n_bins):
+                    acc_n += bin_n[a, b - 1]
+                    for c in range(3):
+                        acc_lo[c] = min(acc_lo[c], bin_lo[a, b - 1, c])
+                        acc_hi[c] = max(acc_hi[c], bin_hi[a, b - 1, c])
+                    if acc_n == 0 or right_n[b] == 0:
+                        continue
+                    cost = acc_n * _area(acc_lo, acc_hi) + right_n[b] * right_area[b]
+                    if cost < best_cost:
+                        best_cost = cost
+                        best_axis = a
+                        best_bin = b
+        split_cost = np.inf
+        if best_axis >= 0:
+            split_cost = C_TRAVERSAL + C_INTERSECT * best_cost / max(parent_area, 1e-300)
+        leaf_cost = C_INTERSECT * count
+        make_leaf = count < min_leaf_split or depth >= MAX_DEPTH or (
+            leaf_cost <= split_cost and count <= max_leaf)
+        if midpoint and count >= min_leaf_split and depth < MAX_DEPTH:
+            # The thesis's "plane division" (for comparison only): the middle of the
+            # centroid bounds' longest axis, leaves by size alone; SAH's choice only where
+            # the middle leaves one side empty.
+            a = 0
+            for c in range(1, 3):
+                if chi[c] - clo[c] > chi[a] - clo[a]:
+                    a = c
+            left = 0
+            for b in range(n_bins // 2):
+                left += bin_n[a, b]
+            if chi[a] - clo[a] > 0.0 and 0 < left < count:
+                best_axis = a
+                best_bin = n_bins // 2
+            make_leaf = count <= max_leaf or best_axis < 0
         mid = start
         known = 0
         if not make_leaf:
@@ -515,6 +501,9 @@ def _build_plain(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split, mid
                 clo[a] = min(clo[a], centroid[t, a])
                 chi[a] = max(chi[a], centroid[t, a])
         # Find the best binned split.
+        best_cost = np.inf
+        best_axis = -1
+        best_bin = 0
         parent_area = _area(lo, hi)
         if count >= min_leaf_split and depth < MAX_DEPTH:
             for a in range(3):
@@ -534,9 +523,59 @@ def _build_plain(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split, mid
                         for c in range(3):
                             bin_lo[a, b, c] = min(bin_lo[a, b, c], tri_lo[t, c])
                             bin_hi[a, b, c] = max(bin_hi[a, b, c], tri_hi[t, c])
-        best_axis, best_bin, make_leaf = _choose_split(
-            bin_n, bin_lo, bin_hi, clo, chi, n_bins, count, depth, parent_area, max_leaf,
-            min_leaf_split, midpoint, acc_lo, acc_hi, right_n, right_area)
+            for a in range(3):
+                if chi[a] - clo[a] <= 0.0:
+                    continue
+                # Suffix sweep: area and count right of each boundary.
+                for c in range(3):
+                    acc_lo[c] = np.inf
+                    acc_hi[c] = -np.inf
+                acc_n = 0
+                for b in range(n_bins - 1, 0, -1):
+                    acc_n += bin_n[a, b]
+                    for c in range(3):
+                        acc_lo[c] = min(acc_lo[c], bin_lo[a, b, c])
+                        acc_hi[c] = max(acc_hi[c], bin_hi[a, b, c])
+                    right_n[b] = acc_n
+                    right_area[b] = _area(acc_lo, acc_hi) if acc_n > 0 else 0.0
+                # Prefix sweep; boundary b splits bins < b from bins >= b.
+                for c in range(3):
+                    acc_lo[c] = np.inf
+                    acc_hi[c] = -np.inf
+                acc_n = 0
+                for b in range(1, n_bins):
+                    acc_n += bin_n[a, b - 1]
+                    for c in range(3):
+                        acc_lo[c] = min(acc_lo[c], bin_lo[a, b - 1, c])
+                        acc_hi[c] = max(acc_hi[c], bin_hi[a, b - 1, c])
+                    if acc_n == 0 or right_n[b] == 0:
+                        continue
+                    cost = acc_n * _area(acc_lo, acc_hi) + right_n[b] * right_area[b]
+                    if cost < best_cost:
+                        best_cost = cost
+                        best_axis = a
+                        best_bin = b
+        split_cost = np.inf
+        if best_axis >= 0:
+            split_cost = C_TRAVERSAL + C_INTERSECT * best_cost / max(parent_area, 1e-300)
+        leaf_cost = C_INTERSECT * count
+        make_leaf = count < min_leaf_split or depth >= MAX_DEPTH or (
+            leaf_cost <= split_cost and count <= max_leaf)
+        if midpoint and count >= min_leaf_split and depth < MAX_DEPTH:
+            # The thesis's "plane division" (for comparison only): the middle of the
+            # centroid bounds' longest axis, leaves by size alone; SAH's choice only where
+            # the middle leaves one side empty.
+            a = 0
+            for c in range(1, 3):
+                if chi[c] - clo[c] > chi[a] - clo[a]:
+                    a = c
+            left = 0
+            for b in range(n_bins // 2):
+                left += bin_n[a, b]
+            if chi[a] - clo[a] > 0.0 and 0 < left < count:
+                best_axis = a
+                best_bin = n_bins // 2
+            make_leaf = count <= max_leaf or best_axis < 0
         mid = start
         if not make_leaf:
             if best_axis >= 0:
