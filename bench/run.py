@@ -344,22 +344,45 @@ def _pass_time(backend, scene, spp, repeats):
     return t
 
 
-def section_filtering(backend_name, res, spp, repeats, r):
-    """Bilinear against nearest texture filtering on scenes/textured.json."""
+def section_filtering(backend_name, res, spp, repeats, r, grazing_spps=(4, 16, 64),
+                      reference_spp=4096, grazing_res=(96, 48), seeds=4):
+    """Texture filters: camera paths/s of scenes/textured.json with each filter, and the
+    error of each on a checkerboard plane at grazing angles (bench.scenes.grazing_plane):
+    relMSE at a few spp against the converged bilinear image (the true pixel averages)."""
+    import tempfile
     from pathtracer.backends import make_backend
-    from pathtracer.scene import compile_scene, load_scene_description
-    desc = load_scene_description(os.path.join(ROOT, "scenes", "textured.json"))
-    desc.camera.resolution = res
-    out = {}
-    from pathtracer.kernels.layout import FILTER_BILINEAR, FILTER_NEAREST, TEX_FILTER
-    for filt in ("bilinear", "nearest"):
+    from pathtracer.film import relmse
+    from pathtracer.progressive import render
+    from pathtracer.scene import compile_scene, load_scene, load_scene_description
+    from bench.scenes import grazing_plane
+    filters = ("trilinear", "bilinear", "nearest")
+    out = {"paths_per_s": {}, "grazing": {}}
+    for filt in filters:
+        desc = load_scene_description(os.path.join(ROOT, "scenes", "textured.json"))
+        desc.camera.resolution = res
+        for m in desc.materials.values():
+            for spec in list(m.textures.values()) + (
+                    [m.normal_map] if m.normal_map is not None else []):
+                spec.filter = filt
         scene = compile_scene(desc)
-        scene.arrays.tex_int[:, TEX_FILTER] = (FILTER_NEAREST if filt == "nearest" else
-                                               FILTER_BILINEAR)
         t = _pass_time(make_backend(backend_name, scene), scene, spp, repeats)
-        out[filt] = res[0] * res[1] * spp / t
+        out["paths_per_s"][filt] = res[0] * res[1] * spp / t
         r.add("filtering", "textured", f"pt-render {backend_name}", "camera_paths_per_s",
-              out[filt], "1/s", "filter", filt)
+              out["paths_per_s"][filt], "1/s", "filter", filt)
+    if not grazing_spps:
+        return out
+    with tempfile.TemporaryDirectory() as folder:
+        def image(filt, n, seed):
+            scene = load_scene(grazing_plane(folder, filt, grazing_res))
+            return render(scene, make_backend(backend_name, scene), spp=n,
+                          seed=seed).film.image()
+        ref = image("bilinear", reference_spp, 1_000_003)
+        for filt in filters:
+            for n in grazing_spps:
+                e = float(np.mean([relmse(image(filt, n, s), ref) for s in range(seeds)]))
+                out["grazing"][(filt, n)] = e
+                r.add("filtering", "grazing-plane", f"pt-render {backend_name}", "relmse", e,
+                      "", "filter, spp", f"{filt}, {n}")
     return out
 
 
@@ -597,9 +620,15 @@ def summary(r, res, args):
                          f"{bounce / 1e6:.4g} | {shadow / 1e6:.4g} | "
                          f"{(paths + bounce + shadow) / 1e6:.4g} |")
     if res["filtering"]:
-        lines += ["", "## Texture filtering (textured.json)", "",
-                  "| filter | M camera paths/s |", "|---|---|"]
-        lines += [f"| {k} | {v / 1e6:.3g} |" for k, v in res["filtering"].items()]
+        flt = res["filtering"]
+        spps = sorted({n for _, n in flt["grazing"]})
+        lines += ["", "## Texture filtering", "",
+                  "| filter | M camera paths/s (textured.json) | " +
+                  " | ".join(f"grazing plane relMSE, {n} spp" for n in spps) + " |",
+                  "|---|---|" + "---|" * len(spps)]
+        lines += [f"| {k} | {v / 1e6:.3g} | " +
+                  " | ".join(f"{flt['grazing'][(k, n)]:.3g}" for n in spps) + " |"
+                  for k, v in flt["paths_per_s"].items()]
     if res["blocks"]:
         lines += ["", "## CUDA block sizes (Cornell box)", "", "| block | M camera paths/s |",
                   "|---|---|"]
@@ -740,7 +769,11 @@ def main(argv=None):
     if "throughput" in want:
         res["throughput"] = section_throughput([b], tp[0], tp[1], repeats, r)
     if "filtering" in want:
-        res["filtering"] = section_filtering(b, filt_res, 2 if args.tiny else 8, repeats, r)
+        res["filtering"] = section_filtering(
+            b, filt_res, 2 if args.tiny else 8, repeats, r,
+            grazing_spps=() if args.tiny else (4, 16, 64),   # (tiny: no more compiles)
+            reference_spp=64 if args.tiny else 4096,
+            grazing_res=(32, 16) if args.tiny else (96, 48), seeds=1 if args.tiny else 4)
     if args.gpu and "blocks" in want:
         res["blocks"] = section_blocks((1024, 1024), 16, repeats, r)
     if "bvh" in want:

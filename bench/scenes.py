@@ -142,3 +142,31 @@ def mesh_desc(obj, res, bounces=3):
         "objects": [{"name": "o", "file": obj, "material": "m", "smooth": False,
                      "transform": {"matrix": fit_matrix(obj)}}],
         "environment": {"color": 1.0}})
+
+
+def grazing_plane(folder, filt, res=(64, 32), spp=4):
+    """A black-and-white checkerboard plane seen at grazing angles under a uniform sky of
+    1, direct light only (a diffuse albedo a reflects exactly a, so all noise is the
+    texture's): what aliases without mip-maps (issue 14's texture-filtering check). Writes
+    the texture, the plane and ``<filt>.json`` into ``folder``; returns the scene's path."""
+    import imageio.v3 as iio
+    n, sq = 256, 32
+    yy, xx = np.mgrid[0:n, 0:n]
+    chk = ((xx // sq + yy // sq) % 2 * 255).astype(np.uint8)
+    iio.imwrite(os.path.join(folder, "chk.png"), np.repeat(chk[:, :, None], 3, 2))
+    with open(os.path.join(folder, "plane.obj"), "w") as f:
+        f.write("v -1 0 1\nv 1 0 1\nv 1 0 -1\nv -1 0 -1\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
+                "vn 0 1 0\nf 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n")
+    scene = {"camera": {"resolution": list(res), "position": [0, 0.5, 0],
+                        "lookAt": [0, 0, -6], "fov": 40},
+             "render": {"spp": spp, "maxBounces": 1},
+             "materials": [{"name": "m", "type": "diffuse",
+                            "albedo": {"texture": "chk.png", "filter": filt,
+                                       "tile": [50, 50]}}],
+             "objects": [{"name": "p", "file": "plane.obj", "material": "m",
+                          "transform": {"scale": 50}}],
+             "environment": {"color": 1.0}}
+    path = os.path.join(folder, f"{filt}.json")
+    with open(path, "w") as f:
+        json.dump(scene, f)
+    return path

@@ -19,8 +19,9 @@ DEVICE_BYTES_PER_PIXEL = 48
 # Host bytes per triangle while compiling (float64 world-space copies, BVH build,
 # per-triangle kernel arrays); the parsed mesh itself is not included.
 TRIANGLE_BYTES = 1200
-# A texture: its decoded 8-bit/float source, the float32 texels, the concatenated table.
-TEXEL_BYTES = 40
+# A texture: its decoded 8-bit/float source, the float32 texels, the concatenated table
+# (with the mip levels of a trilinear texture, a third more, and the halving's temporary).
+TEXEL_BYTES = 48
 
 GIB = 2.0 ** 30
 

@@ -9,6 +9,7 @@ import numpy as np
 from . import limits
 from .errors import Interrupted
 from .film import Film
+from .scene.compile import for_spp
 
 
 @dataclass
@@ -71,6 +72,9 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
     rr_depth = scene.rr_depth if rr_depth is None else rr_depth
     if spp is None and time_limit is None:
         spp = scene.spp
+    scene = for_spp(scene, spp)      # texture footprints narrow with more samples
+    if backend.scene is not scene:
+        backend.update(scene)
     film = Film(scene.height, scene.width)
     t0 = time.perf_counter()
     backend.compile()

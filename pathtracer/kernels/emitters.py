@@ -31,6 +31,7 @@ from .layout import ENV_P_SELECT, PL_INTENSITY, PL_POSITION, point_light_index, 
 from .lights import direction_to, sample_discrete, sample_triangle_point
 from .materials import emits
 from .surface import make_surface
+from .textures import NO_FOOTPRINT
 from .vec import dot, load3
 from .warps import power_heuristic, square_to_triangle
 
@@ -94,7 +95,7 @@ def make_emitters(features, target="cpu"):
             lb1, lb2 = square_to_triangle(u1, u2)
             lu, lv = tri_uv_at(tri_uv, ref, lb1, lb2)
         return (wi, dist * SHADOW_SHORTEN, emitted(mat, mat_tex, tex_data, tex_int, tex_f, lm,
-                                                   lu, lv),
+                                                   lu, lv, NO_FOOTPRINT),
                 pdf_area * dist * dist / abs(cos_l), False, ref)
 
     @step
@@ -145,15 +146,19 @@ def make_emitters(features, target="cpu"):
 
     @step
     def hit_emission(mat, mat_tex, tex_data, tex_int, tex_f, tri_light_pdf, tri, m, cos_o, t,
-                     pdf_prev, u, v):
+                     pdf_prev, u, v, fp):
         """(emitted radiance, MIS weight, emits) of triangle tri (material m) reached at
-        distance t, seen at cosine cos_o with its front normal."""
+        distance t, seen at cosine cos_o with its front normal; fp: the footprint of the
+        texture lookup (see textures.cone_footprint)."""
         if not emits(mat, m, cos_o):
             return NO_RADIANCE, ZERO, False
         pdf_light = ZERO
         if pdf_prev > ZERO:
             pdf_light = tri_light_pdf[tri] * t * t / abs(cos_o)
-        return (emitted(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v),
+            # The footprint filters only what the camera sees directly: a MIS-weighted hit
+            # sees the unfiltered emission, as the light sample it is weighed against does.
+            fp = NO_FOOTPRINT
+        return (emitted(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v, fp),
                 mis_weight_hit(pdf_prev, pdf_light), True)
 
     @step

@@ -26,6 +26,7 @@ CAM_UP = 9            # up, scaled by tan(fov_y / 2)
 CAM_LENS_X = 12       # thin lens: lens radius / tan(fov_x / 2)
 CAM_LENS_Y = 13       # thin lens: lens radius / tan(fov_y / 2)
 CAM_FOCUS = 14        # thin lens: distance of the plane in focus
+CAM_CONE = 15         # ray cones: spread per unit distance (scene.compile.cone_spread)
 CAM_SIZE = 16
 
 # ---- Triangles: one row per triangle, in BVH leaf order --------------------------------------
@@ -177,15 +178,17 @@ ENV_INFO_SIZE = 4
 TEX_FIRST = 0         # index of the first texel in tex_data
 TEX_WIDTH = 1
 TEX_HEIGHT = 2
-TEX_FILTER = 3        # FILTER_BILINEAR or FILTER_NEAREST
+TEX_FILTER = 3        # FILTER_BILINEAR, FILTER_NEAREST or FILTER_TRILINEAR
 TEX_WRAP = 4          # u's WRAP_* in bits 0-1, v's in bits 2-3
-TEX_INT_WIDTH = 5
+TEX_LEVELS = 5        # mip levels stored from TEX_FIRST on (1: the image alone)
+TEX_INT_WIDTH = 6
 TEX_TILE = 0          # u, v
 TEX_OFFSET = 2        # u, v
 TEX_SCALE = 4         # r, g, b
 TEX_F_WIDTH = 7
 FILTER_BILINEAR = 0
 FILTER_NEAREST = 1
+FILTER_TRILINEAR = 2  # mip-mapped (level k: max(1, width >> k) x max(1, height >> k))
 WRAP_REPEAT = 0
 WRAP_CLAMP = 1        # clamp to the edge texels
 WRAP_MIRROR = 2       # mirrored repeat
@@ -256,6 +259,7 @@ class Features(NamedTuple):
     thin_lens: bool = False    # aperture > 0
     sobol: bool = False        # Owen-scrambled Sobol sampler (else independent)
     wrap_modes: bool = False   # a texture that mirrors or clamps (else all repeat)
+    mipmaps: bool = False      # a mip-mapped (trilinear) texture: ray cones are traced
 
 
 class Specialisation(NamedTuple):
@@ -278,6 +282,7 @@ class Specialisation(NamedTuple):
     lean: bool             # Lambertian and flat shading only: the cheapest path
     sobol: bool            # the Owen-scrambled Sobol sampler
     wrap_modes: bool       # texture wrap modes other than repeat
+    mipmaps: bool          # trilinear textures: ray-cone footprints for their lookups
 
 
 def specialise(features):
@@ -293,7 +298,7 @@ def specialise(features):
         smooth=f.smooth, principled=f.principled, textures=f.textures,
         normal_map=normal_map, tangents=f.tangents, thin_lens=f.thin_lens, fold=fold,
         lean=not f.principled and not fold, sobol=f.sobol,
-        wrap_modes=f.wrap_modes and f.textures)
+        wrap_modes=f.wrap_modes and f.textures, mipmaps=f.mipmaps and f.textures)
 
 
 class SceneArrays(NamedTuple):

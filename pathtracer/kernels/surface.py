@@ -97,25 +97,26 @@ def make_surface(features, target="cpu"):
     SMOOTH = S.smooth
     TANGENTS = S.tangents
     NORMAL_MAP = S.normal_map
-    tex_lookup = make_tex_lookup(S.wrap_modes)
+    tex_lookup = make_tex_lookup(S.wrap_modes, S.mipmaps)
 
     @step
-    def param1(mat, mat_tex, tex_data, tex_int, tex_f, m, slot, col, u, v):
-        """A number parameter of material m, from its texture when it has one."""
+    def param1(mat, mat_tex, tex_data, tex_int, tex_f, m, slot, col, u, v, fp):
+        """A number parameter of material m, from its texture when it has one (fp: the
+        lookup's footprint in texture coordinates, see textures.cone_footprint)."""
         if TEXTURES:
             t = mat_tex[m, slot]
             if t >= 0:
-                r, g, b = tex_lookup(tex_data, tex_int, tex_f, t, u, v)
+                r, g, b = tex_lookup(tex_data, tex_int, tex_f, t, u, v, fp)
                 return luminance(r, g, b)
         return mat[m, col]
 
     @step
-    def param3(mat, mat_tex, tex_data, tex_int, tex_f, m, slot, col, u, v):
+    def param3(mat, mat_tex, tex_data, tex_int, tex_f, m, slot, col, u, v, fp):
         """A colour parameter of material m, from its texture when it has one."""
         if TEXTURES:
             t = mat_tex[m, slot]
             if t >= 0:
-                return tex_lookup(tex_data, tex_int, tex_f, t, u, v)
+                return tex_lookup(tex_data, tex_int, tex_f, t, u, v, fp)
         return mat[m, col], mat[m, col + 1], mat[m, col + 2]
 
     @step
@@ -130,68 +131,72 @@ def make_surface(features, target="cpu"):
         return ZERO, ZERO
 
     @step
-    def emitted(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v):
+    def emitted(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v, fp):
         """Emitted radiance of material m at texture coordinates (u, v)."""
-        return param3(mat, mat_tex, tex_data, tex_int, tex_f, m, T_EMISSION, M_EMISSION, u, v)
+        return param3(mat, mat_tex, tex_data, tex_int, tex_f, m, T_EMISSION, M_EMISSION, u, v,
+                      fp)
 
     @step
-    def principled_at(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v):
+    def principled_at(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v, fp):
         """The principled parameter tuple (layout P_*) of material m at (u, v)."""
-        base = param3(mat, mat_tex, tex_data, tex_int, tex_f, m, T_ALBEDO, M_ALBEDO, u, v)
+        base = param3(mat, mat_tex, tex_data, tex_int, tex_f, m, T_ALBEDO, M_ALBEDO, u, v,
+                      fp)
         transmission = unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m,
-                                   T_TRANSMISSION, M_TRANSMISSION, u, v))
-        eta = param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_ETA, M_ETA, u, v)
+                                   T_TRANSMISSION, M_TRANSMISSION, u, v, fp))
+        eta = param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_ETA, M_ETA, u, v, fp)
         if not (eta > ZERO):
             # derived from specular: F0 = 0.08 specular = ((eta - 1) / (eta + 1))^2
             spec = unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_SPECULAR,
-                               M_SPECULAR, u, v))
+                               M_SPECULAR, u, v, fp))
             eta = TWO / (ONE - math.sqrt(SPEC_K * spec)) - ONE
         if transmission > ZERO and eta == ONE:
             eta = ETA_MIN_TRANSMISSIVE
         return (max(base[0], ZERO), max(base[1], ZERO), max(base[2], ZERO),
                 unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_ROUGHNESS,
-                            M_ROUGHNESS, u, v)),
+                            M_ROUGHNESS, u, v, fp)),
                 unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_METALLIC,
-                            M_METALLIC, u, v)),
+                            M_METALLIC, u, v, fp)),
                 eta,
                 unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_SPEC_TINT,
-                            M_SPEC_TINT, u, v)),
+                            M_SPEC_TINT, u, v, fp)),
                 unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_ANISOTROPIC,
-                            M_ANISOTROPIC, u, v)),
+                            M_ANISOTROPIC, u, v, fp)),
                 unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_SHEEN, M_SHEEN,
-                            u, v)),
+                            u, v, fp)),
                 unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_SHEEN_TINT,
-                            M_SHEEN_TINT, u, v)),
+                            M_SHEEN_TINT, u, v, fp)),
                 unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_CLEARCOAT,
-                            M_CLEARCOAT, u, v)),
+                            M_CLEARCOAT, u, v, fp)),
                 unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_CLEARCOAT_GLOSS,
-                            M_CLEARCOAT_GLOSS, u, v)),
+                            M_CLEARCOAT_GLOSS, u, v, fp)),
                 unit(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_SUBSURFACE,
-                            M_SUBSURFACE, u, v)),
+                            M_SUBSURFACE, u, v, fp)),
                 transmission)
 
     @step
-    def material_at(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v):
+    def material_at(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v, fp):
         """(is_principled, parameter tuple) of material m at (u, v); a diffuse material
         fills only the base colour (and eta 1)."""
-        alb = param3(mat, mat_tex, tex_data, tex_int, tex_f, m, T_ALBEDO, M_ALBEDO, u, v)
+        alb = param3(mat, mat_tex, tex_data, tex_int, tex_f, m, T_ALBEDO, M_ALBEDO, u, v,
+                     fp)
         params = (alb[0], alb[1], alb[2], ZERO, ZERO, ONE, ZERO, ZERO, ZERO, ZERO,
                   ZERO, ZERO, ZERO, ZERO)
         is_principled = False
         if PRINCIPLED:
             is_principled = mat[m, M_TYPE] == MAT_PRINCIPLED
             if is_principled:
-                params = principled_at(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v)
+                params = principled_at(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v, fp)
         return is_principled, params
 
     @step
-    def mapped_normal(mat_tex, tex_data, tex_int, tex_f, tri_t, tri, m, u, v, ns, tangent):
+    def mapped_normal(mat_tex, tex_data, tex_int, tex_f, tri_t, tri, m, u, v, fp, ns,
+                      tangent):
         """The world-space normal of material m's normal map at (u, v) (OpenGL convention:
         +Y, green, along the bitangent n x t times the handedness of the UV mapping), in the
         frame of the smooth normal ns and its tangent; ns where there is no normal map."""
         tn = mat_tex[m, T_NORMAL]
         if tn >= 0:
-            c = tex_lookup(tex_data, tex_int, tex_f, tn, u, v)
+            c = tex_lookup(tex_data, tex_int, tex_f, tn, u, v, fp)
             bt = scale(cross(ns, tangent), tri_t[tri, TRI_T_SIGN])
             nm = add(add(scale(tangent, TWO * c[0] - ONE), scale(bt, TWO * c[1] - ONE)),
                      scale(ns, TWO * c[2] - ONE))
@@ -201,7 +206,7 @@ def make_surface(features, target="cpu"):
 
     @step
     def shading_frame(tri_n, tri_t, mat_tex, tex_data, tex_int, tex_f, tri, m, b1, b2, e1,
-                      ng, wo, transmissive, u, v):
+                      ng, wo, transmissive, u, v, fp):
         """(ng, ns, tangent, bitangent, wp): the geometric normal, the orthonormal shading
         frame and the normal-mapped normal wp in that frame ((0, 0, 1) without a normal
         map), all turned to wo's side unless the material is transmissive (an interface
@@ -231,7 +236,7 @@ def make_surface(features, target="cpu"):
         nm = ns
         if NORMAL_MAP:
             if has_tangent:
-                nm = mapped_normal(mat_tex, tex_data, tex_int, tex_f, tri_t, tri, m, u, v, ns,
+                nm = mapped_normal(mat_tex, tex_data, tex_int, tex_f, tri_t, tri, m, u, v, fp, ns,
                                    tangent)
         if side < ZERO:
             ng = neg(ng)

@@ -18,6 +18,7 @@ Every column is written by its name in :mod:`pathtracer.kernels.layout`.
 import math
 import os
 import time
+import dataclasses
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -26,21 +27,22 @@ import numpy as np
 from .. import limits
 from ..accel import build_bvh
 from ..kernels.envmap import environment_tables
-from ..kernels.layout import (CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_LENS_Y, CAM_ORIGIN,
-                              CAM_RIGHT, CAM_SIZE, CAM_UP, ENV_COS_ROT, ENV_INFO_SIZE,
-                              ENV_P_SELECT, ENV_SIN_ROT, FILTER_BILINEAR, FILTER_NEAREST,
+from ..kernels.layout import (CAM_CONE, CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_LENS_Y, CAM_ORIGIN,
+                              CAM_RIGHT,
+                              CAM_SIZE, CAM_UP, ENV_COS_ROT, ENV_INFO_SIZE, ENV_P_SELECT,
+                              ENV_SIN_ROT, FILTER_BILINEAR, FILTER_NEAREST, FILTER_TRILINEAR,
                               M_ALBEDO, M_ANISOTROPIC, M_EMISSION, M_ETA, M_TWO_SIDED, M_TYPE,
-                              MAT_DIFFUSE, MAT_PRINCIPLED, MAT_WIDTH, MATERIAL_PARAMS,
-                              N_SLOTS, NO_TEXTURE, PL_INTENSITY, PL_POSITION, PL_WIDTH,
-                              T_ALBEDO, T_EMISSION, T_NORMAL, TEX_F_WIDTH, TEX_FILTER, TEX_WRAP,
-                              WRAP_CLAMP, WRAP_MIRROR, WRAP_REPEAT,
-                              TEX_FIRST, TEX_HEIGHT, TEX_INT_WIDTH, TEX_OFFSET, TEX_SCALE,
-                              TEX_TILE, TEX_WIDTH, TRI_E1, TRI_E2, TRI_N_WIDTH, TRI_T0,
-                              TRI_T_SIGN, TRI_T_WIDTH, TRI_UV_WIDTH, TRI_V0, TRI_V_WIDTH,
-                              Features, SceneArrays, point_light_ref)
+                              MAT_DIFFUSE, MAT_PRINCIPLED, MAT_WIDTH, MATERIAL_PARAMS, N_SLOTS,
+                              NO_TEXTURE, PL_INTENSITY, PL_POSITION, PL_WIDTH, T_ALBEDO, T_EMISSION,
+                              T_NORMAL, TEX_F_WIDTH, TEX_FILTER, TEX_WRAP, WRAP_CLAMP, WRAP_MIRROR,
+                              WRAP_REPEAT, TEX_FIRST, TEX_HEIGHT, TEX_INT_WIDTH, TEX_LEVELS,
+                              TEX_OFFSET, TEX_SCALE, TEX_TILE, TEX_WIDTH, TRI_E1, TRI_E2,
+                              TRI_N_WIDTH, TRI_T0, TRI_T_SIGN, TRI_T_WIDTH, TRI_UV_WIDTH, TRI_V0,
+                              TRI_V_WIDTH, Features, SceneArrays, point_light_ref)
 from .errors import SceneError
 from .geometry import safe_normalize, vertex_normals, vertex_tangents
-from .images import load_texture, read_image, srgb_to_linear
+from .images import (halve_level, load_texture, mip_levels, mip_texels, read_image,
+                     srgb_to_linear)
 from .loader import (EnvironmentMap, SceneDescription, TextureSpec, euler_matrix,
                      load_scene_description, scene_material)
 from .meshes import load_mesh
@@ -66,6 +68,17 @@ class CompiledScene:
     bvh_depth: int = 0
     origin_shift: tuple = (0.0, 0.0, 0.0)   # subtracted from all positions (float64)
     warnings: list = field(default_factory=list)
+
+
+def for_spp(scene, spp):
+    """``scene`` with its ray cones set for a render of ``spp`` samples per pixel (see
+    cone_spread): the scene itself when nothing changes (no trilinear texture, or its own
+    spp), else a copy with a new camera row."""
+    if not scene.features.mipmaps or spp is None or int(spp) == scene.spp:
+        return scene
+    cam = scene.arrays.cam.copy()
+    cam[CAM_CONE] *= _narrowing(spp) / _narrowing(scene.spp)
+    return dataclasses.replace(scene, arrays=scene.arrays._replace(cam=cam))
 
 
 class CompileMemo:
@@ -140,8 +153,9 @@ def compile_scene(desc, use_cache=True, bvh_options=None, memo=None):
         textures=use_textures, normal_map=tables.any_normal_map and use_textures,
         tangents=use_tangents, env_map=env.has_map, thin_lens=desc.camera.lens_radius > 0,
         sobol=desc.render.sampler == "sobol",
-        wrap_modes=use_textures and any(p[4] != ("repeat", "repeat") for p in tables.tex_params))
-    cam = camera_array(desc.camera, tri.shift)
+        wrap_modes=use_textures and any(p[4] != ("repeat", "repeat") for p in tables.tex_params),
+        mipmaps=use_textures and any(p[0] == "trilinear" for p in tables.tex_params))
+    cam = camera_array(desc.camera, tri.shift, desc.render.spp)
     if not (np.isfinite(cam).all() and np.abs(cam).max() <= limits.FLOAT32_MAX):
         raise SceneError("the camera's numbers overflow float32 (position, fov, aperture or "
                          "focus distance)", desc.path, "/camera")
@@ -167,8 +181,22 @@ def compile_scene(desc, use_cache=True, bvh_options=None, memo=None):
 # ---------------------------------------------------------------------------------------
 # Camera
 
-def camera_array(cam, shift=np.zeros(3)):
-    """The kernel's camera row (layout CAM_*) of a Camera, positions moved by -shift."""
+def cone_spread(pixel_angle, spp):
+    """A ray cone's spread per unit distance (layout CAM_CONE): the angle of a pixel
+    narrowed by max(1/8, 1/sqrt(spp)), pbrt-v4's scale of camera ray differentials
+    (Pharr, Jakob, Humphreys 2023, sec. 5.2.5): the samples of a pixel already average
+    over it, so a texture footprint of the whole pixel would blur twice; the more samples,
+    the less of the footprint is left to the texture filter."""
+    return pixel_angle * _narrowing(spp)
+
+
+def _narrowing(spp):
+    return max(0.125, 1.0 / math.sqrt(max(int(spp), 1)))
+
+
+def camera_array(cam, shift=np.zeros(3), spp=1):
+    """The kernel's camera row (layout CAM_*) of a Camera, positions moved by -shift; the
+    ray cone's spread is that of a render of ``spp`` samples per pixel."""
     w, h = cam.resolution
     pos = np.asarray(cam.position, np.float64)
     if cam.look_at is not None:
@@ -191,6 +219,7 @@ def camera_array(cam, shift=np.zeros(3)):
         out[CAM_LENS_X] = cam.lens_radius / tan_x
         out[CAM_LENS_Y] = cam.lens_radius / tan_y
         out[CAM_FOCUS] = cam.focus_distance
+    out[CAM_CONE] = cone_spread(2 * tan_y / h, spp)     # a pixel's angle at the centre
     return out
 
 
@@ -290,15 +319,29 @@ class MaterialTables:
         if not self.tex_images:
             return (mat, mat_tex, np.zeros((1, 3), np.float32),
                     np.zeros((1, TEX_INT_WIDTH), np.int32), np.zeros((1, TEX_F_WIDTH), np.float32))
-        sizes = [im.shape[0] * im.shape[1] for im in self.tex_images]
+        mipmapped = [p[0] == "trilinear" for p in self.tex_params]
+        levels = [mip_levels(*im.shape[:2]) if mip else 1
+                  for im, mip in zip(self.tex_images, mipmapped)]
+        sizes = [mip_texels(*im.shape[:2], n) for im, n in zip(self.tex_images, levels)]
 
         def texels():
-            # (one texture: a view, not a copy; the texels are float32 already)
-            return (self.tex_images[0].reshape(-1, 3) if len(self.tex_images) == 1 else
-                    np.concatenate([im.reshape(-1, 3) for im in self.tex_images]))
+            # (one texture without levels: a view, not a copy; the texels are float32)
+            if len(self.tex_images) == 1 and not mipmapped[0]:
+                return self.tex_images[0].reshape(-1, 3)
+            # one allocation; each mip level written in place from the one before
+            out = np.empty((sum(sizes), 3), np.float32)
+            at = 0
+            for im, n in zip(self.tex_images, levels):
+                level = im
+                for k in range(n):
+                    if k:
+                        level = halve_level(level)
+                    out[at:at + level.shape[0] * level.shape[1]] = level.reshape(-1, 3)
+                    at += level.shape[0] * level.shape[1]
+            return out
         # a re-compile with the same textures keeps the same array (the GPU keeps its copy)
         tex_data = texels() if self.memo is None else self.memo.get(
-            ("texels",) + tuple(id(im) for im in self.tex_images), texels)
+            ("texels",) + tuple(id(im) for im in self.tex_images) + tuple(mipmapped), texels)
         tex_int = np.zeros((len(sizes), TEX_INT_WIDTH), np.int32)
         tex_f = np.zeros((len(sizes), TEX_F_WIDTH), np.float32)
         offs = np.concatenate([[0], np.cumsum(sizes)[:-1]])
@@ -306,13 +349,16 @@ class MaterialTables:
             raise SceneError("textures too large (more than 2^31 texels in all)",
                              self.scene_file)
         wraps = {"repeat": WRAP_REPEAT, "clamp": WRAP_CLAMP, "mirror": WRAP_MIRROR}
+        filters = {"nearest": FILTER_NEAREST, "bilinear": FILTER_BILINEAR,
+                   "trilinear": FILTER_TRILINEAR}
         for i, (im, (filt, tile, offset, scale, wrap)) in enumerate(zip(self.tex_images,
                                                                          self.tex_params)):
             tex_int[i, TEX_WRAP] = wraps[wrap[0]] | (wraps[wrap[1]] << 2)
             tex_int[i, TEX_FIRST] = offs[i]
             tex_int[i, TEX_WIDTH] = im.shape[1]
             tex_int[i, TEX_HEIGHT] = im.shape[0]
-            tex_int[i, TEX_FILTER] = FILTER_NEAREST if filt == "nearest" else FILTER_BILINEAR
+            tex_int[i, TEX_FILTER] = filters[filt]
+            tex_int[i, TEX_LEVELS] = levels[i]
             tex_f[i, TEX_TILE:TEX_TILE + 2] = tile
             tex_f[i, TEX_OFFSET:TEX_OFFSET + 2] = offset
             tex_f[i, TEX_SCALE:TEX_SCALE + 3] = scale

@@ -39,6 +39,7 @@ COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16,
 WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 # sampler constants
 NEAREST = 9728
+LINEAR = 9729
 REPEAT, CLAMP_TO_EDGE, MIRRORED_REPEAT = 10497, 33071, 33648
 WRAP_MODES = {None: "repeat", REPEAT: "repeat", CLAMP_TO_EDGE: "clamp",
               MIRRORED_REPEAT: "mirror"}
@@ -511,6 +512,8 @@ class GltfModel:
             s = g.samplers[tex.sampler]
             if s.magFilter == NEAREST:
                 spec["filter"] = "nearest"
+            elif s.minFilter in (NEAREST, LINEAR):      # minified without mip-maps
+                spec["filter"] = "bilinear"
             modes = []
             for axis, mode in (("wrapS", s.wrapS), ("wrapT", s.wrapT)):
                 if mode not in WRAP_MODES:

@@ -104,3 +104,59 @@ def load_texture(spec, scene_file=None, allow_negative=False):
         raise SceneError(f"image {spec.path} has values beyond the float32 range",
                          scene_file or spec.path, spec.pointer)
     return np.asarray(img, np.float32)
+
+
+def _halve(img, axis):
+    """``img`` (float32) shrunk along ``axis`` from n to max(1, n // 2) texels, each new
+    texel the exact mean of the source interval it covers (a box filter of n / (n // 2)
+    texels: odd sizes mix up to three source texels with fractional weights)."""
+    n = img.shape[axis]
+    if n == 1:
+        return img
+    m = n // 2
+    if n == 2 * m:                    # even: plain pairs (strided views, one new array)
+        even = [slice(None)] * img.ndim
+        odd = [slice(None)] * img.ndim
+        even[axis] = slice(0, n, 2)
+        odd[axis] = slice(1, n, 2)
+        out = np.add(img[tuple(even)], img[tuple(odd)], dtype=np.float32)
+        out *= np.float32(0.5)
+        return out
+    ratio = n / m
+    lo = np.arange(m) * ratio          # new texel i covers [lo_i, lo_i + ratio) of the source
+    out = None
+    first = np.floor(lo).astype(np.int64)
+    for k in range(4):                 # ratio < 3: at most 4 source texels overlap
+        j = first + k
+        w = np.clip(np.minimum(j + 1, lo + ratio) - np.maximum(j, lo), 0.0, None) / ratio
+        shape = [1] * img.ndim
+        shape[axis] = m
+        term = img.take(np.minimum(j, n - 1), axis=axis) * w.astype(np.float32).reshape(shape)
+        out = term if out is None else out + term
+    return out.astype(np.float32)
+
+
+def halve_level(level):
+    """The next mip level of ``level`` (H, W, 3): max(1, H // 2) x max(1, W // 2)."""
+    return _halve(_halve(level, 0), 1)
+
+
+def mip_pyramid(img):
+    """The mip levels of ``img`` (H, W, 3) float32, finest first, down to 1 x 1: level k is
+    max(1, H >> k) x max(1, W >> k), each texel the mean of the finer texels it covers
+    (area-weighted for odd sizes), so every level has the image's mean. Linear values are
+    averaged (the texels are decoded from sRGB first)."""
+    levels = [np.ascontiguousarray(img, np.float32)]
+    while levels[-1].shape[0] > 1 or levels[-1].shape[1] > 1:
+        levels.append(halve_level(levels[-1]))
+    return levels
+
+
+def mip_levels(height, width):
+    """How many levels mip_pyramid makes for a height x width image (down to 1 x 1)."""
+    return max(int(height), int(width)).bit_length()
+
+
+def mip_texels(height, width, levels):
+    """Texels in the first ``levels`` levels of a height x width image's pyramid."""
+    return sum(max(1, height >> k) * max(1, width >> k) for k in range(levels))

@@ -9,7 +9,6 @@ import json
 import math
 import os
 import re
-import warnings
 from dataclasses import dataclass, field
 from typing import Optional
 
@@ -55,7 +54,7 @@ class RenderSettings:
 class TextureSpec:
     path: str
     color_space: str = "linear"      # "sRGB" or "linear"
-    filter: str = "bilinear"         # or "nearest"
+    filter: str = "trilinear"        # mip-mapped; or "bilinear", "nearest"
     tile: tuple = (1.0, 1.0)
     offset: tuple = (0.0, 0.0)
     scale: tuple = (1.0, 1.0, 1.0)
@@ -581,14 +580,9 @@ def _texture_spec(n, key, base, color_space):
         spec = TextureSpec(path=_texture_path(p, base, n.file, t.path("texture")),
                            color_space=t.string("colorSpace", color_space,
                                                 choices=("sRGB", "linear")),
-                           filter=t.string("filter", "bilinear",
+                           filter=t.string("filter", "trilinear",
                                            choices=("trilinear", "bilinear", "nearest")),
                            pointer=where)
-        if spec.filter == "trilinear":
-            # the scene format's default once mip-maps exist; bilinear until then
-            warnings.warn(f"{n.file}: {t.path('filter')}: trilinear filtering needs "
-                          "mip-maps, not built yet: filtered bilinearly", stacklevel=2)
-            spec.filter = "bilinear"
         spec.channel = t.string("channel", None, choices=("r", "g", "b", "a"))
         if t.has("wrap"):
             w = t.raw("wrap")

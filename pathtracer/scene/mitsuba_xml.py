@@ -400,9 +400,9 @@ def _rgb_or_texture(r, el, tag_el):
         spec = {"texture": r.get(tp, "filename", "str")}
         raw = r.get(tp, "raw", "bool", False)
         spec["colorSpace"] = "linear" if raw else "sRGB"
-        if "filter_type" in tp:
-            ft = r.get(tp, "filter_type", "str")
-            spec["filter"] = "nearest" if ft == "nearest" else "bilinear"
+        # Mitsuba 3 has no mip-maps: its bitmaps are filtered bilinearly (or nearest)
+        ft = r.get(tp, "filter_type", "str") if "filter_type" in tp else "bilinear"
+        spec["filter"] = "nearest" if ft == "nearest" else "bilinear"
         for k in tp:
             if k not in ("filename", "raw", "filter_type"):
                 r.warn(f"bitmap parameter {k!r} ignored", v)
