@@ -164,6 +164,37 @@ def test_bad_files(tmp_path):
         pt.load_scene(str(tmp_path / "missing.xml"))
 
 
+def test_included_files_as_mitsubas_writer_splits_them(tmp_path):
+    """Mitsuba's XML writer (mitsuba.python.xml.WriteXML, split_files=True) puts
+    materials, geometry, emitters and cameras in files of their own that the main file
+    <include>s: the Cornell box split that way reads as the single file does; a missing or
+    self-including file is a named error."""
+    import xml.etree.ElementTree as ETree
+    root = ETree.parse(XML_CORNELL).getroot()
+    parts = {"bsdf": "mats.xml", "shape": "geom.xml", "emitter": "emit.xml",
+             "sensor": "cams.xml"}
+    main = ETree.Element("scene", root.attrib)
+    subs = {f: ETree.Element("scene", root.attrib) for f in parts.values()}
+    for el in root:
+        (subs[parts[el.tag]] if el.tag in parts else main).append(el)
+    for f, sub in subs.items():
+        ETree.ElementTree(sub).write(tmp_path / f)
+        ETree.SubElement(main, "include", filename=f)
+    ETree.ElementTree(main).write(tmp_path / "main.xml")
+    split, _ = convert_file(str(tmp_path / "main.xml"))
+    whole, _ = convert_file(XML_CORNELL)
+    assert split == whole
+    (tmp_path / "loop.xml").write_text('<scene version="3.0.0"><include filename="loop.xml"/>'
+                                       "</scene>")
+    with pytest.raises(pt.SceneError, match="nested deeper"):
+        convert_file(str(tmp_path / "loop.xml"))
+    (tmp_path / "gone.xml").write_text('<scene version="3.0.0"><include filename="x.xml"/>'
+                                       "</scene>")
+    with pytest.raises(pt.SceneError, match="included file x.xml not found") as e:
+        convert_file(str(tmp_path / "gone.xml"))
+    assert "include[1]" in str(e.value)
+
+
 # ---------------------------------------------------------------------------------------
 # Fuzzing: a mutated Mitsuba file loads or fails with one SceneError, never anything else
 

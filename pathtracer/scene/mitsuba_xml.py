@@ -232,6 +232,7 @@ def convert_file(path):
     if not version.startswith("3"):
         r.warn(f"scene version {version or '(none)'}: read as Mitsuba 3 XML")
     _index(r, root, "/scene")
+    _expand_includes(r, root, 0)
     for el in root:
         if el.tag == "default":
             name = el.get("name")
@@ -273,6 +274,45 @@ def convert_file(path):
     if not out["materials"]:
         del out["materials"]
     return out, r.warnings
+
+
+MAX_INCLUDE_DEPTH = 8
+
+
+def _expand_includes(r, el, depth):
+    """Every ``<include filename="..."/>`` among el's children replaced by the children of
+    the included file's ``<scene>`` (Mitsuba's include: files relative to the scene's
+    folder, as Mitsuba's own XML writer splits materials, geometry, emitters and cameras
+    into separate files), recursively."""
+    i = 0
+    while i < len(el):
+        child = el[i]
+        if child.tag != "include":
+            i += 1
+            continue
+        name = child.get("filename")
+        if not name:
+            raise r.error("<include> without a filename", child)
+        if depth >= MAX_INCLUDE_DEPTH:
+            raise r.error(f"includes nested deeper than {MAX_INCLUDE_DEPTH} (a file that "
+                          "includes itself?)", child)
+        path = name if os.path.isabs(name) else os.path.join(r.base, name)
+        try:
+            sub = ET.parse(path).getroot()
+        except FileNotFoundError:
+            raise r.error(f"included file {name} not found", child) from None
+        except OSError as e:
+            raise r.error(f"cannot read included file {name}: {e.strerror or e}",
+                          child) from None
+        except ET.ParseError as e:
+            raise r.error(f"included file {name}: invalid XML: {e}", child) from None
+        if sub.tag != "scene":
+            raise r.error(f"included file {name}: expected a <scene> element, got "
+                          f"<{sub.tag}>", child)
+        _index(r, sub, f"{r.where.get(child, '/scene')} -> {name}:/scene")
+        _expand_includes(r, sub, depth + 1)
+        el[i:i + 1] = list(sub)
+        i += len(sub)
 
 
 def _index(r, el, where):
