@@ -41,7 +41,7 @@ from ..kernels.layout import (CAM_CONE, CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_
                               TRI_V_WIDTH, Features, SceneArrays, point_light_ref)
 from .errors import SceneError
 from .geometry import safe_normalize, vertex_normals, vertex_tangents
-from .images import (halve_level, load_texture, mip_levels, mip_texels, read_image,
+from .images import (load_texture, mip_chain, mip_levels, mip_texels, read_image,
                      srgb_to_linear)
 from .loader import (EnvironmentMap, SceneDescription, TextureSpec, euler_matrix,
                      load_scene_description, scene_material)
@@ -331,23 +331,20 @@ class MaterialTables:
             # one allocation; each mip level written in place from the one before
             out = np.empty((sum(sizes), 3), np.float32)
             at = 0
-            for im, n in zip(self.tex_images, levels):
-                level = im
-                for k in range(n):
-                    if k:
-                        level = halve_level(level)
+            for im, mip in zip(self.tex_images, mipmapped):
+                for level in (mip_chain(im) if mip else [im]):
                     out[at:at + level.shape[0] * level.shape[1]] = level.reshape(-1, 3)
                     at += level.shape[0] * level.shape[1]
             return out
+        if sum(sizes) >= 2 ** 31:     # (checked before the texel array is allocated)
+            raise SceneError("textures too large (more than 2^31 texels in all, mip levels "
+                             "included)", self.scene_file)
         # a re-compile with the same textures keeps the same array (the GPU keeps its copy)
         tex_data = texels() if self.memo is None else self.memo.get(
             ("texels",) + tuple(id(im) for im in self.tex_images) + tuple(mipmapped), texels)
         tex_int = np.zeros((len(sizes), TEX_INT_WIDTH), np.int32)
         tex_f = np.zeros((len(sizes), TEX_F_WIDTH), np.float32)
         offs = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-        if tex_data.shape[0] >= 2 ** 31:
-            raise SceneError("textures too large (more than 2^31 texels in all)",
-                             self.scene_file)
         wraps = {"repeat": WRAP_REPEAT, "clamp": WRAP_CLAMP, "mirror": WRAP_MIRROR}
         filters = {"nearest": FILTER_NEAREST, "bilinear": FILTER_BILINEAR,
                    "trilinear": FILTER_TRILINEAR}

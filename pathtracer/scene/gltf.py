@@ -26,7 +26,9 @@ import functools
 import hashlib
 import math
 import os
+import tempfile
 import urllib.parse
+from types import SimpleNamespace
 import warnings as _warnings
 
 import numpy as np
@@ -609,7 +611,6 @@ class GltfModel:
 
 def _info(d):
     """A textureInfo given as a plain dict (inside an extension) as an object."""
-    from types import SimpleNamespace
     return SimpleNamespace(index=d.get("index"), texCoord=d.get("texCoord", 0),
                            extensions=d.get("extensions"))
 
@@ -636,7 +637,7 @@ def _cached_image(data, suffix):
     from .._cache import cache_root
     name = hashlib.sha256(data).hexdigest()[:32] + suffix
     for folder in (os.path.join(cache_root(), "gltf-images"),
-                   os.path.join(__import__("tempfile").gettempdir(), "pt-render-gltf-images")):
+                   os.path.join(tempfile.gettempdir(), "pt-render-gltf-images")):
         path = os.path.join(folder, name)
         if os.path.isfile(path):
             return path

@@ -136,20 +136,22 @@ def _halve(img, axis):
     return out.astype(np.float32)
 
 
-def halve_level(level):
-    """The next mip level of ``level`` (H, W, 3): max(1, H // 2) x max(1, W // 2)."""
-    return _halve(_halve(level, 0), 1)
+def mip_chain(img):
+    """The mip levels of ``img`` (H, W, 3) float32, finest first, one at a time, down to
+    1 x 1: level k is max(1, H >> k) x max(1, W >> k), each texel the mean of the finer
+    texels it covers (area-weighted for odd sizes), so every level has the image's mean.
+    Linear values are averaged (the texels are decoded from sRGB first). One level at a
+    time: the scene compiler writes each into the texel array before making the next."""
+    level = img
+    yield level
+    while level.shape[0] > 1 or level.shape[1] > 1:
+        level = _halve(_halve(level, 0), 1)
+        yield level
 
 
 def mip_pyramid(img):
-    """The mip levels of ``img`` (H, W, 3) float32, finest first, down to 1 x 1: level k is
-    max(1, H >> k) x max(1, W >> k), each texel the mean of the finer texels it covers
-    (area-weighted for odd sizes), so every level has the image's mean. Linear values are
-    averaged (the texels are decoded from sRGB first)."""
-    levels = [np.ascontiguousarray(img, np.float32)]
-    while levels[-1].shape[0] > 1 or levels[-1].shape[1] > 1:
-        levels.append(halve_level(levels[-1]))
-    return levels
+    """All of mip_chain's levels, as a list."""
+    return list(mip_chain(np.ascontiguousarray(img, np.float32)))
 
 
 def mip_levels(height, width):

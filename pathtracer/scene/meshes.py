@@ -309,11 +309,11 @@ def _check_vertex_lines(data, path):
         if end < len(arr):
             nl = data.rfind(b"\n", begin, end)
             end = nl + 1 if nl >= begin else len(arr)
-        line_base = _check_chunk(arr[begin:end], data, begin, line_base, path)
+        line_base = _check_chunk(arr[begin:end], line_base, path)
         begin = end
 
 
-def _check_chunk(chunk, data, offset, line_base, path):
+def _check_chunk(chunk, line_base, path):
     is_nl = chunk == 10
     starts = np.flatnonzero(is_nl) + 1
     starts = np.concatenate(([0], starts[starts < len(chunk)]))
