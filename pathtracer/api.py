@@ -192,13 +192,13 @@ class Scene:
         return desc
 
     # -- backends: one per kind, kept while the features and image size stay the same
-    def _backend(self, name, options):
+    def _backend(self, name, options, split=None):
         from .backends import make_backend
         from .backends import cuda_available
         if name == "auto":
             name = "cuda" if cuda_available() else "cpu"
         c = self.compiled
-        key = (name, tuple(sorted(options.items())))
+        key = (name, tuple(sorted(options.items())), split)
         got = self._backends.get(key)
         if got is not None and got[1] == (c.features, c.width, c.height):
             backend = got[0]
@@ -206,11 +206,30 @@ class Scene:
                 backend.update(c)
             return backend, False
         try:
-            backend = make_backend(name, c, **options)
+            if split is not None:
+                backend = _split_backend(c, name, split)
+            else:
+                backend = make_backend(name, c, **options)
         except RuntimeError as e:
             raise InputError(str(e)) from None
         self._backends[key] = (backend, (c.features, c.width, c.height))
         return backend, True
+
+
+def _split_backend(compiled, name, split):
+    """A SplitBackend over local GPUs (("devices", ids)) or Ray workers (("ray", address,
+    workers))."""
+    from .distribute import SplitBackend, ThreadPool
+    if split[0] == "devices":
+        if name not in ("cuda", "cpu"):
+            raise InputError("devices: the cuda backend (or cpu, for tests) splits over "
+                             f"devices, not {name}")
+        kinds = [(name, d if name == "cuda" else None) for d in split[1]]
+        return SplitBackend(compiled, ThreadPool(kinds), name)
+    from .cluster import pool
+    p = pool(split[1], split[2])
+    kinds = {i["device"].split(" ")[0].split(":")[0] for i in p.infos}
+    return SplitBackend(compiled, p, kinds.pop() if len(kinds) == 1 else "mixed")
 
 
 def load_scene(source, allow_missing=False, base=None, camera=None, environment=None,
@@ -335,6 +354,7 @@ class Result:
     backend: str = ""
     signal: int = 0
     denoise_seconds: float = 0.0
+    shares: object = None    # several devices or workers: each one's share of the samples
 
     def __repr__(self):
         return (f"<Result {self.image.shape[1]}x{self.image.shape[0]}, {self.spp} spp in "
@@ -394,7 +414,8 @@ def output_files(output, denoised=False, aovs=False):
 
 def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
            callback=None, max_bounces=None, adaptive=None, aovs=False, denoise=False,
-           pass_seconds=None, _backend_options=None, _on_stage=None):
+           pass_seconds=None, devices=None, ray=None, ray_workers=None, resume=None,
+           _backend_options=None, _on_stage=None):
     """Render ``scene`` (a :class:`Scene`, a path or a dict) to ``spp`` samples per pixel
     or for ``time`` seconds, whichever comes first (neither: the scene's spp).
 
@@ -405,6 +426,17 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
     the image with Open Image Denoise (``raw`` keeps the noisy one). ``callback(progress)``
     is called after every pass with a :class:`Progress`; returning False stops the render
     (the result holds the passes done). Ctrl-C stops it too. Returns a :class:`Result`.
+
+    Several devices: ``devices`` (a list of CUDA device numbers, or "all") renders every
+    pass on those GPUs at once; ``ray`` (an address, or "local" for a Ray runtime on this
+    machine) on ``ray_workers`` Ray workers (default: one per GPU of the cluster, else
+    one). The image is the one-device image up to float32 rounding (see
+    :mod:`pathtracer.distribute`).
+
+    ``resume``: continue a render: a :class:`pathtracer.resume.RenderState` (saved by
+    ``pt-render``, read by ``pathtracer.resume.load``) or the ``film`` of an earlier
+    :class:`Result` of the same scene and seed; ``spp`` is then the total to reach.
+    Its samples are not repeated: the render goes on from its sample count.
     (``_on_stage(stage, seconds)``, for the CLI's messages: 'compiling', 'compiled',
     'aovs' done.)
     """
@@ -430,6 +462,19 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
     if denoise:
         from .denoise import check_available
         check_available()
+    split = None
+    if devices is not None and ray is not None:
+        raise ValueError("devices and ray: give one of them")
+    if devices is not None:
+        if isinstance(devices, str):
+            from .distribute import local_devices
+            devices = local_devices(devices) if backend != "cpu" else None
+        if not devices or not all(isinstance(d, (int, np.integer)) for d in devices):
+            raise ValueError(f"devices must be a list of device numbers or 'all', got "
+                             f"{devices!r}")
+        split = ("devices", tuple(int(d) for d in devices))
+    elif ray is not None:
+        split = ("ray", str(ray), None if ray_workers is None else int(ray_workers))
     if sampler is not None and sampler != scene.description.render.sampler:
         # the sampler is a feature (the kernel's code), not a value: a scene that differs
         # in it alone shares the arrays
@@ -438,12 +483,12 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
             saved, features=saved.features._replace(sobol=sampler == "sobol"))
         try:
             return render(scene, spp, time, seed, backend, None, callback, max_bounces,
-                          adaptive, aovs, denoise, pass_seconds, _backend_options,
-                          _on_stage)
+                          adaptive, aovs, denoise, pass_seconds, devices, ray, ray_workers,
+                          resume, _backend_options, _on_stage)
         finally:
             scene.compiled = saved
 
-    be, new = scene._backend(backend, dict(_backend_options or {}))
+    be, new = scene._backend(backend, dict(_backend_options or {}), split)
     compile_seconds = 0.0
     stage = _on_stage or (lambda stage, seconds: None)
     if new:
@@ -453,7 +498,20 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
         compile_seconds = _time.perf_counter() - t0
         stage("compiled", compile_seconds)
     c = scene.compiled
+    film, footprint_spp = None, None
+    if resume is not None:
+        from .film import Film
+        from .resume import RenderState
+        if isinstance(resume, RenderState):
+            footprint_spp = resume.footprint_spp or None
+            seed = resume.seed if seed is None else seed
+            resume = resume.film
+        if not isinstance(resume, Film):
+            raise TypeError("resume takes a RenderState (pathtracer.resume.load) or a "
+                            f"Result's film, not {type(resume).__name__}")
+        film = copy.deepcopy(resume)
     seed = c.seed if seed is None else seed
+    spp0 = 0 if film is None else film.spp
     aov_images = None
     if aovs or denoise:
         from .denoise import AOV_SPP
@@ -470,20 +528,26 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
     def on_pass(film, elapsed):
         if callback is None:
             return
-        p = Progress(film.spp, spp, elapsed, time, film.spp * pixels / max(elapsed, 1e-9),
+        p = Progress(film.spp, spp, elapsed, time,
+                     (film.spp - spp0) * pixels / max(elapsed, 1e-9),
                      film, aov_images)
         return callback(p)
+    if film is not None and spp is not None and film.spp >= spp:
+        spp = film.spp          # a resumed render already there: nothing more to render
     if pass_seconds is None:
-        pass_seconds = 0.25 if be.name == "cuda" else 0.5
+        pass_seconds = getattr(be, "pass_seconds", 0.25 if be.name == "cuda" else 0.5)
     first_pass = 1
     if callback is None and time is None and spp is not None:
         # Nobody sees the intermediate images: start with a pass of up to FIRST_PASS_PATHS
         # paths (a power of 2 spp), so a small re-render is one or two launches, not log2(spp).
         while first_pass * 2 <= spp and first_pass * 2 * pixels <= FIRST_PASS_PATHS.get(be.name, 0):
             first_pass *= 2
+    before = (0, 0, 0) if film is None else (film.camera_rays, film.bounce_rays,
+                                             film.shadow_rays)
     r = progressive(c, be, spp=spp, time_limit=time, seed=seed, max_bounces=max_bounces,
                     pass_seconds=pass_seconds, on_pass=on_pass if callback else None,
-                    adaptive=adaptive, first_pass=first_pass)
+                    adaptive=adaptive, first_pass=first_pass, film=film,
+                    footprint_spp=footprint_spp)
     r.compile_seconds = compile_seconds
     stopped = r.interrupted or r.stopped
     film = r.film
@@ -496,14 +560,16 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
         raw, image = image, run_denoiser(image, aov_images)
         denoise_seconds = _time.perf_counter() - t0
     seconds = r.seconds
+    # (the rates count this render's rays: a resumed film holds earlier ones too)
+    new_rays = (film.camera_rays - before[0], film.bounce_rays - before[1],
+                film.shadow_rays - before[2])
     stats = {"camera_rays": film.camera_rays, "bounce_rays": film.bounce_rays,
              "shadow_rays": film.shadow_rays, "nonfinite": film.nonfinite,
-             "paths_per_second": film.camera_rays / seconds if seconds > 0 else float("nan"),
-             "rays_per_second": (film.camera_rays + film.bounce_rays + film.shadow_rays)
-             / seconds if seconds > 0 else float("nan")}
+             "paths_per_second": new_rays[0] / seconds if seconds > 0 else float("nan"),
+             "rays_per_second": sum(new_rays) / seconds if seconds > 0 else float("nan")}
     return Result(image, film.spp, seconds, compile_seconds, stopped, stats, scene.display,
                   raw, aov_images if aovs else None, film, r.passes, be.name, r.signal,
-                  denoise_seconds)
+                  denoise_seconds, be.shares() if hasattr(be, "shares") else None)
 
 
 __all__ = ["Scene", "load_scene", "render", "Result", "Progress", "output_files",

@@ -130,12 +130,15 @@ def build_parser():
                     "SIGTERM or SIGHUP stop the render and keep what is done. Exit codes: 0 "
                     "done, 2 bad input, 3 an output could not be written, 128+N stopped by "
                     "signal N (the image saved), 1 a bug.")
-    p.add_argument("scene", help="scene file (JSON, see docs/scene-format.md; a glTF 2.0 "
+    p.add_argument("scene", nargs="+",
+                   help="scene file (JSON, see docs/scene-format.md; a glTF 2.0 "
                    "model, .gltf or .glb; or a Mitsuba 3 XML scene, its common subset), or a "
-                   "thesis renderer scene folder")
+                   "thesis renderer scene folder; several: a batch, rendered one after "
+                   "another (each on every device or worker given)")
     p.add_argument("-o", "--output", default=None,
                    help="output image; the extension picks the format: .png (8-bit sRGB, "
                         "with a lossless float .exr beside it), .hdr, .exr or .npy (float linear RGB). "
+                        "'{name}' in it is replaced by the scene's name (needed for a batch). "
                         "Default: the scene's name with .png, in the current folder")
     p.add_argument("--spp", type=_integer(1, limits.MAX_SPP),
                    help="samples per pixel (default: the scene's)")
@@ -144,6 +147,23 @@ def build_parser():
     p.add_argument("--backend", choices=("auto", "cpu", "cuda", "python"), default="auto",
                    help="auto: CUDA when a GPU is present, else CPU; python: interpreted "
                         "(slow, for debugging)")
+    p.add_argument("--devices", metavar="all|0,1,...",
+                   help="render on several CUDA GPUs of this machine at once (one worker "
+                        "each, the load balanced as they go); 'all' or device numbers")
+    p.add_argument("--ray", metavar="ADDRESS",
+                   help="render on a Ray cluster: its address (auto, HOST:6379, "
+                        "ray://HOST:10001), or 'local' to start a Ray runtime on this "
+                        "machine; needs pip install -e '.[cluster]'")
+    p.add_argument("--ray-workers", type=_integer(1, 4096), metavar="N",
+                   help="Ray workers (default: one per GPU of the cluster, else one); each "
+                        "uses a GPU or, without one, an equal share of the CPUs")
+    p.add_argument("--resume", metavar="OUTPUT",
+                   help="continue the render saved as OUTPUT (its image, or the "
+                        "OUTPUT_STEM.state.npz written beside it) to --spp or --time "
+                        "(counted from the first start); the samples go on where it stopped")
+    p.add_argument("--no-state", action="store_true",
+                   help="do not write OUTPUT_STEM.state.npz (the accumulation --resume "
+                        "continues)")
     p.add_argument("--seed", type=_integer(0, limits.MAX_SEED),
                    help="random seed (default: the scene's)")
     p.add_argument("--resolution", type=_resolution, metavar="WxH",
@@ -318,17 +338,24 @@ class Saver:
     fails warns and is retried at the next refresh; the final save falls back to another
     folder and says where."""
 
-    def __init__(self, targets, signals, warn, display=None):
+    def __init__(self, targets, signals, warn, display=None, state=None):
         self.targets = targets
         self.signals = signals
         self.warn = warn
         self.display = display       # (exposure, tone curve) of 8-bit files
         self.last_error = None
+        self.state = state           # (path, make(film) -> RenderState) or None
 
-    def periodic(self, image):
+    def _write_state(self, film):
+        if self.state is not None and film is not None:
+            from .resume import save
+            save(self.state[0], self.state[1](film))
+
+    def periodic(self, image, film=None):
         try:
             with self.signals.deferred():
                 write_images(self.targets, image, self.display)
+                self._write_state(film)
             self.last_error = None
         except OSError as e:
             message = f"could not save {self.targets[0]} ({e.strerror or e})"
@@ -336,11 +363,16 @@ class Saver:
                 self.warn(f"{message}; rendering goes on and the next refresh retries")
             self.last_error = message
 
-    def final(self, image):
+    def final(self, image, film=None):
         """The targets written, or raises OutputError after saving elsewhere if it can."""
         with self.signals.deferred(raise_after=False):
             try:
                 write_images(self.targets, image, self.display)
+                try:
+                    self._write_state(film)
+                except OSError as e:
+                    self.warn(f"could not save the render state {self.state[0]} "
+                              f"({e.strerror or e}); the image was written")
                 return self.targets
             except OSError as e:
                 first = e
@@ -378,9 +410,50 @@ def main(argv=None):
 
 
 def _main(args):
+    scenes = args.scene
+    if len(scenes) > 1:
+        for flag, given in (("--resume", args.resume), ("--reference", args.reference),
+                            ("--preview", args.preview is not None),
+                            ("--pixel", args.pixel)):
+            if given:
+                print(f"pt-render: error: {flag} is for one scene, not a batch of "
+                      f"{len(scenes)}", file=sys.stderr)
+                return EXIT_INPUT
+        if args.output is not None and "{name}" not in args.output:
+            print("pt-render: error: --output for a batch of scenes needs '{name}' (e.g. "
+                  "-o renders/{name}.png), or leave it out", file=sys.stderr)
+            return EXIT_INPUT
+    codes = []
     with StopSignals() as signals:
         try:
-            return _render(args, signals)
+            for i, path in enumerate(scenes):
+                if len(scenes) > 1:
+                    print(f"pt-render: scene {i + 1} of {len(scenes)}: {path}",
+                          file=sys.stderr)
+                code = _one(args, path, signals)
+                codes.append(code)
+                if code >= 128:           # stopped by a signal: the batch ends
+                    break
+        finally:
+            if args.ray:
+                try:
+                    from .cluster import shutdown
+                    shutdown()
+                except Exception:         # the runtime is gone already
+                    pass
+    if len(scenes) > 1:
+        failed = [p for p, c in zip(scenes, codes) if c != EXIT_OK]
+        print(f"pt-render: batch: {len(codes) - len(failed)} of {len(scenes)} scenes "
+              f"rendered" + (f"; not: {', '.join(failed)}" if failed else ""),
+              file=sys.stderr)
+    return max(codes, key=lambda c: (c >= 128, c)) if codes else EXIT_OK
+
+
+def _one(args, scene_path, signals):
+    """Render one scene of the command line; its exit code."""
+    if True:
+        try:
+            return _render(args, scene_path, signals)
         except Interrupted as e:
             print(f"pt-render: interrupted ({signal.Signals(e.signum).name}) before the first "
                   "pass; nothing written", file=sys.stderr)
@@ -417,12 +490,21 @@ def _fail(error, args, code):
     return code
 
 
-def _render(args, signals):
+def _render(args, scene_path, signals):
     log = sys.stderr
-    scene_path = args.scene
+    name = os.path.splitext(os.path.basename(scene_path.rstrip("/")))[0]
+    state = None
+    if args.resume:
+        from .resume import StateError, load, state_path
+        try:
+            state = load(state_path(args.resume))
+        except StateError as e:
+            raise InputError(f"--resume: {e}") from None
     output = args.output
     if output is None:
-        output = os.path.splitext(os.path.basename(scene_path.rstrip("/")))[0] + ".png"
+        output = args.resume if args.resume and not args.resume.endswith(".state.npz") \
+            else name + ".png"
+    output = output.replace("{name}", name)
     ext = os.path.splitext(output)[1].lower()
     if output == "":
         raise InputError("--output: empty path")
@@ -473,15 +555,77 @@ def _render(args, signals):
         options["pixels"] = ((x, y),)
 
     spp = args.spp if args.spp is not None else (None if args.time else scene.spp)
+    time_limit = args.time
     from .backends import cuda_available
     backend_name = args.backend
+    if args.devices and args.ray:
+        raise InputError("--devices and --ray: give one of them (--ray uses the cluster's "
+                         "GPUs)")
+    devices = None
+    if args.devices:
+        if backend_name not in ("auto", "cuda"):
+            raise InputError(f"--devices is for CUDA GPUs, not --backend {backend_name}")
+        from .distribute import local_devices
+        devices = local_devices(args.devices)
+        backend_name = "cuda"
+    if args.ray and backend_name == "python":
+        raise InputError("--ray runs the compiled backends, not --backend python")
     if backend_name == "auto":
         backend_name = "cuda" if cuda_available() else "cpu"
+    where = backend_name
+    if devices:
+        where = f"cuda on {len(devices)} GPUs ({','.join(map(str, devices))})"
+    elif args.ray:
+        where = f"Ray cluster {args.ray}"
     print(f"pt-render: {scene_path}: {scene.width}x{scene.height}, {scene.n_triangles} "
           f"triangles, loaded in {load_seconds:.2f} s (BVH "
-          f"{scene.compiled.timings['bvh_build']:.2f} s); backend {backend_name}; features "
+          f"{scene.compiled.timings['bvh_build']:.2f} s); backend {where}; features "
           f"{', '.join(k for k, v in scene.features._asdict().items() if v) or 'none'}",
           file=log)
+
+    # The saved accumulation (resume): checked against this scene, continued from
+    max_bounces = (args.max_bounces if args.max_bounces is not None
+                   else scene.compiled.max_bounces)
+    seed = args.seed
+    state_file = None
+    saved_state = None           # (path, film -> RenderState) for the saver
+    if state is not None or not args.no_state:
+        from .resume import RenderState, scene_hash, state_path
+        state_file = state_path(output)
+        _check_writable_folder(state_file, "--output")
+        digest = scene_hash(scene.compiled, max_bounces, scene.compiled.rr_depth)
+        seconds_before = 0.0
+        if state is not None:
+            got = state.film
+            if (got.width, got.height) != (scene.width, scene.height):
+                raise InputError(f"--resume {args.resume}: the saved render is "
+                                 f"{got.width}x{got.height}, this one {scene.width}x"
+                                 f"{scene.height} (give the same --resolution)")
+            if digest != state.scene_hash:
+                raise InputError(f"--resume {args.resume}: the saved render is of another "
+                                 "scene, or of other settings (resolution, sampler, "
+                                 "--max-bounces, or a changed file the scene reads)")
+            if seed is not None and seed != state.seed:
+                raise InputError(f"--resume {args.resume}: it was rendered with seed "
+                                 f"{state.seed}, not {seed} (leave --seed out)")
+            seed = state.seed
+            seconds_before = state.seconds
+            if time_limit is not None:
+                time_limit -= seconds_before      # --time counts from the first start
+            footprint = state.footprint_spp
+            print(f"pt-render: resuming {state.film.spp} spp ({seconds_before:.1f} s) from "
+                  f"{state_path(args.resume)}", file=log)
+        else:
+            footprint = spp if spp is not None else scene.spp
+        adaptive_target = args.adaptive or (state.adaptive if state is not None else 0.0)
+
+        def make_state(film):
+            return RenderState(film, scene.seed if seed is None else seed, digest,
+                               footprint if scene.features.mipmaps else 0,
+                               seconds_before + elapsed_now[0], adaptive_target or 0.0)
+        if not args.no_state:
+            saved_state = (state_file, make_state)
+    elapsed_now = [0.0]
 
     from .progress import Progress
     compile_seconds = [0.0]
@@ -500,16 +644,19 @@ def _render(args, signals):
             print(f"pt-render: albedo and normal images ({AOV_SPP} spp) in {seconds:.2f} s",
                   file=log)
 
-    progress = Progress(spp, args.time, scene.width * scene.height, quiet=args.quiet,
-                        stream=log)
+    if state is not None and time_limit is not None and time_limit <= 0:
+        # a resumed render already past its --time: nothing more to render
+        spp, time_limit = state.film.spp, None
+    progress = Progress(spp, time_limit, scene.width * scene.height, quiet=args.quiet,
+                        stream=log, start_spp=0 if state is None else state.film.spp)
     saver = Saver(targets, signals, lambda m: progress.write(f"pt-render: warning: {m}"),
-                  scene.display)
+                  scene.display, saved_state)
     denoise_seconds = []
     preview = None
     if args.preview is not None:
         from .preview import PreviewServer
         preview = PreviewServer(args.preview_host, args.preview, scene.display,
-                                target_spp=spp, time_limit=args.time,
+                                target_spp=spp, time_limit=time_limit,
                                 denoise=args.denoise)
         print(f"pt-render: preview at {preview.url} ({preview.reach}; the render never "
               "waits for it)", file=log)
@@ -531,6 +678,7 @@ def _render(args, signals):
 
     def on_pass(p):
         film, elapsed = p.film, p.elapsed
+        elapsed_now[0] = elapsed
         signals.check()
         progress.update(film.spp, elapsed)
         err = None
@@ -541,16 +689,17 @@ def _render(args, signals):
         if preview is not None:
             preview.publish(p, relmse=err)
         if elapsed >= next_write[0]:
-            saver.periodic(outputs(film.image(), p.aovs))
+            saver.periodic(outputs(film.image(), p.aovs), film)
             next_write[0] = elapsed * 2   # refresh at growing intervals
 
     if reference is not None:
         progress.write(f"{'elapsed':>12} {'spp':>12}  relMSE")
     try:
-        result = render_scene(scene, spp=spp, time=args.time, seed=args.seed,
-                              backend=args.backend, callback=on_pass,
+        result = render_scene(scene, spp=spp, time=time_limit, seed=seed,
+                              backend=backend_name, callback=on_pass,
                               max_bounces=args.max_bounces, adaptive=args.adaptive,
-                              aovs=args.aovs, denoise=args.denoise,
+                              aovs=args.aovs, denoise=args.denoise, devices=devices,
+                              ray=args.ray, ray_workers=args.ray_workers, resume=state,
                               _backend_options=options, _on_stage=on_stage)
     except BaseException:
         if preview is not None:
@@ -569,7 +718,9 @@ def _render(args, signals):
     if result.raw is not None:
         denoise_seconds.append(result.denoise_seconds)
     # the final images are the result's (denoised once, by render)
-    written = saver.final([image for _, image in result.outputs(output, aovs=args.aovs)])
+    elapsed_now[0] = result.seconds
+    written = saver.final([image for _, image in result.outputs(output, aovs=args.aovs)],
+                          film)
     if args.adaptive:
         done = float((film.count < film.spp).mean())
         print(f"pt-render: adaptive: {film.count.mean():.1f} spp per pixel on average "
@@ -593,6 +744,9 @@ def _render(args, signals):
           f"{compile_seconds[0]:.2f} s): {stats['paths_per_second'] / 1e6:.3f} M camera "
           f"paths/s, {stats['rays_per_second'] / 1e6:.3f} M rays/s; wrote "
           f"{' and '.join(written)}", file=log)
+    if result.shares:
+        print("pt-render: samples per worker: " + ", ".join(
+            f"{i}: {100 * share:.1f} %" for i, share in enumerate(result.shares)), file=log)
     if film.nonfinite:
         print(f"pt-render: warning: {film.nonfinite} of {film.camera_rays} samples were NaN "
               "or infinite and were left out of the image (please report this scene)",

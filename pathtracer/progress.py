@@ -3,8 +3,10 @@ import sys
 
 
 class Progress:
-    def __init__(self, spp, time_limit, pixels, quiet=False, stream=sys.stderr):
+    def __init__(self, spp, time_limit, pixels, quiet=False, stream=sys.stderr, start_spp=0):
+        """``start_spp``: the samples per pixel a resumed render starts from."""
         self.spp = spp
+        self.start_spp = start_spp
         self.time_limit = time_limit
         self.pixels = pixels
         self.bar = None
@@ -14,6 +16,7 @@ class Progress:
             by_time = spp is None
             self.bar = tqdm(total=time_limit if by_time else spp,
                             unit="s" if by_time else "spp", file=stream, dynamic_ncols=True,
+                            initial=0 if by_time else start_spp,
                             bar_format="{l_bar}{bar}| {n:.4g}/{total_fmt} {unit} "
                                        "[{elapsed}<{remaining}{postfix}]")
         self.by_time = spp is None
@@ -22,7 +25,7 @@ class Progress:
         if self.bar is None:
             return
         self.bar.n = min(elapsed, self.time_limit) if self.by_time else spp
-        rate = spp * self.pixels / max(elapsed, 1e-9)
+        rate = (spp - self.start_spp) * self.pixels / max(elapsed, 1e-9)
         self.bar.set_postfix_str(f"{spp} spp, {rate / 1e6:.2f} M samples/s", refresh=False)
         self.bar.refresh()
 

@@ -47,7 +47,8 @@ def error_estimate(film):
 
 
 def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=None,
-           rr_depth=None, pass_seconds=0.5, on_pass=None, adaptive=None, first_pass=1):
+           rr_depth=None, pass_seconds=0.5, on_pass=None, adaptive=None, first_pass=1,
+           film=None, footprint_spp=None):
     """Render ``scene`` with ``backend`` until ``spp`` samples per pixel or ``time_limit``
     seconds, whichever comes first (spp defaults to the scene's unless a time is given).
 
@@ -66,22 +67,38 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
     every pixel has (or at ``spp`` / ``time_limit``). Each pixel is the plain mean of its
     own samples (nothing clamped); stopping on a noisy estimate of the error is the only
     source of bias, as in every adaptive sampler.
+
+    ``film``: a film to continue (a resumed render, :mod:`pathtracer.resume`): its passes
+    are kept and the render goes on with the samples after them (sample indices
+    ``film.spp``, ...), the ones an uninterrupted render would have drawn; with adaptive
+    sampling its finished pixels stay finished. ``footprint_spp``: the spp the texture
+    footprints are narrowed for (default ``spp``; a resumed render keeps its first one).
     """
     seed = scene.seed if seed is None else seed
     max_bounces = scene.max_bounces if max_bounces is None else max_bounces
     rr_depth = scene.rr_depth if rr_depth is None else rr_depth
     if spp is None and time_limit is None:
         spp = scene.spp
-    scene = for_spp(scene, spp)      # texture footprints narrow with more samples
+    # texture footprints narrow with more samples
+    scene = for_spp(scene, spp if footprint_spp is None else footprint_spp)
     if backend.scene is not scene:
         backend.update(scene)
-    film = Film(scene.height, scene.width)
+    if film is None:
+        film = Film(scene.height, scene.width)
+    elif (film.height, film.width) != (scene.height, scene.width):
+        raise ValueError(f"the film to continue is {film.width}x{film.height}, the scene "
+                         f"{scene.width}x{scene.height}")
     t0 = time.perf_counter()
     backend.compile()
     compile_seconds = time.perf_counter() - t0
     result = RenderResult(film, 0.0, compile_seconds)
     n = 2 if adaptive else max(1, int(first_pass))
     active = None
+    if adaptive and film.spp >= ADAPTIVE_MIN_SPP:
+        # a resumed adaptive render: a pixel that stopped (fewer samples than the film's)
+        # stays stopped, the others are judged again as after any pass
+        active = ((film.count == film.spp) & (error_estimate(film) > adaptive)).astype(
+            np.uint8)
     start = time.perf_counter()
     try:
         while True:
@@ -89,6 +106,8 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
             if (spp is not None and film.spp >= spp) or film.spp >= limits.MAX_SPP:
                 break
             if time_limit is not None and elapsed >= time_limit:
+                break
+            if active is not None and not active.any():
                 break
             n = min(n, limits.MAX_PASS_SAMPLES, limits.MAX_SPP - film.spp)
             if spp is not None:
@@ -117,8 +136,6 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
                 active = (going if active is None else going & (active != 0)).astype(np.uint8)
             if on_pass is not None and on_pass(film, elapsed) is False:
                 result.stopped = True
-                break
-            if active is not None and not active.any():
                 break
             # Grow the pass while it is short; aim the last pass at the time limit.
             if dt < pass_seconds:

@@ -129,3 +129,27 @@ def test_aov_parity(tmp_path):
     assert np.isfinite(a).all() and np.isfinite(b).all()
     close = np.isclose(a, b, rtol=1e-3, atol=1e-3).all(-1)
     assert close.mean() > 0.99
+
+
+@gpu
+def test_split_over_gpus_equals_one_gpu():
+    """--devices: every GPU (device 0 twice on a one-GPU machine: two workers, two
+    threads) renders items of each pass; the image is the one-GPU image up to float32
+    rounding, from the same paths (tests/test_distribute.py states the tolerance)."""
+    import os
+    from numba import cuda
+    import pathtracer as pt
+    from tests.conftest import ROOT
+    from tests.test_distribute import assert_same_render
+    devices = list(range(len(cuda.gpus)))
+    if len(devices) == 1:
+        devices = [0, 0]
+    scene = pt.load_scene(os.path.join(ROOT, "scenes", "cornell-box.json"),
+                          _overrides={"resolution": (160, 120)})
+    a = pt.render(scene, spp=96, backend="cuda")
+    b = pt.render(scene, spp=96, backend="cuda", devices=devices)
+    assert_same_render(a, b)
+    assert len(b.shares) == len(devices) and min(b.shares) > 0
+    c = pt.render(scene, spp=96, backend="cuda", devices=devices, adaptive=0.01)
+    d = pt.render(scene, spp=96, backend="cuda", adaptive=0.01)
+    assert_same_render(d, c)

@@ -104,6 +104,19 @@ def sum_groups(parts, part_stats, groups, out, stats):
             stats[py, px, c] = n
 
 
+@cuda.jit(cache=jit_cache())
+def sum_stats(stats, totals):
+    """totals[c] += the sum of stats[:, :, c]: a thread per row (grid-stride), one atomic
+    add per row and channel (a work item's ray counts, without copying the per-pixel
+    counts)."""
+    for y in range(cuda.grid(1), stats.shape[0], cuda.gridsize(1)):
+        for c in range(stats.shape[2]):
+            acc = np.int64(0)
+            for x in range(stats.shape[1]):
+                acc += stats[y, x, c]
+            cuda.atomic.add(totals, c, acc)
+
+
 def _same(new, old):
     """Whether a re-compiled scene array equals the one already on the GPU: memoised arrays
     are the same object; small ones re-built from the description (materials, camera,
@@ -138,6 +151,7 @@ class CUDABackend:
         self.d_out = cuda.device_array((h, w, 3), np.float32)
         self.d_stats = cuda.device_array((h, w, 3), np.int32)
         self._parts = None   # scratch film (float sums, ray counts), see _scratch
+        self._totals = None  # a work item's ray counts (render_rows)
         self.d_all_pixels = cuda.to_device(np.ones((h, w), np.uint8))
         self._compiled = False
         self.out = cuda.pinned_array((h, w, 3), np.float32)
@@ -195,6 +209,23 @@ class CUDABackend:
         self.d_out.copy_to_host(self.out)
         self.d_stats.copy_to_host(self.stats)
         return self.out, self.stats
+
+    def render_rows(self, sample_start, n_samples, seed, max_bounces, rr_depth, row0, row1,
+                    active=None):
+        """A work item of a split render (pathtracer.distribute): the sums of rows
+        [row0, row1) (float32, a new array) and the ray counts of the pass (int64, 3), summed
+        on the GPU so that only the rows come back."""
+        self.launch(sample_start, n_samples, seed, max_bounces, rr_depth, active)
+        if self._totals is None:
+            self._totals = cuda.device_array(3, np.int64)
+            self._totals_host = cuda.pinned_array(3, np.int64)
+        self._totals.copy_to_device(np.zeros(3, np.int64))
+        # (128 blocks at least: fewer make Numba warn of low occupancy)
+        sum_stats[max(128, (self.scene.height + 31) // 32), 32](self.d_stats, self._totals)
+        rows = self.out[row0:row1]                   # pinned: the fastest copy
+        self.d_out[row0:row1].copy_to_host(rows)
+        self._totals.copy_to_host(self._totals_host)
+        return np.array(rows), self._totals_host.copy()
 
     def aovs(self, n_samples, seed):
         """The denoiser's albedo and normal images (float32 H x W x AOV_WIDTH, see aov_pixel)."""
