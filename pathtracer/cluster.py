@@ -53,10 +53,7 @@ def _actor_class(ray):
     from .distribute import ItemRenderer
 
     class Worker(ItemRenderer):
-        def __init__(self, threads):
-            if threads:
-                # before Numba starts its thread pool (the first parallel kernel)
-                os.environ["NUMBA_NUM_THREADS"] = str(threads)
+        def __init__(self):
             from .backends import cuda_available
             super().__init__("cuda" if cuda_available() else "cpu",
                              fetch=lambda box: ray.get(box[0]))
@@ -82,12 +79,13 @@ class RayPool:
         Worker = _actor_class(ray)
         if gpus >= workers:
             options = dict(num_gpus=1, num_cpus=1)
-            threads = 0
         else:
+            # Numba's CPU threads: the worker's share of the CPUs, set in the environment
+            # the worker process starts with (Numba reads it once its threads run)
             share = max(1, cpus // workers)
-            options = dict(num_cpus=share)
-            threads = share
-        self.actors = [Worker.options(**options).remote(threads) for _ in range(workers)]
+            options = dict(num_cpus=share,
+                           runtime_env={"env_vars": {"NUMBA_NUM_THREADS": str(share)}})
+        self.actors = [Worker.options(**options).remote() for _ in range(workers)]
         self.infos = ray.get([a.info.remote() for a in self.actors])
         self.label = f"Ray {address}: " + ", ".join(
             sorted({f"{i['device']}@{i['host']}" for i in self.infos}))

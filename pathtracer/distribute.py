@@ -24,6 +24,8 @@ is current per thread, so each GPU's backend lives in its own thread); the Ray p
 :class:`ItemRenderer`.
 """
 import dataclasses
+import itertools
+import os
 import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor
@@ -120,7 +122,6 @@ class ItemRenderer:
 
     def info(self):
         """What this worker is (for the log)."""
-        import os
         import socket
         name = self.backend_name
         if self.device is not None:
@@ -207,6 +208,11 @@ def _same(a, b):
                       np.array_equal(a.reshape(-1).view(np.uint8), b.reshape(-1).view(np.uint8)))
 
 
+# Scene keys, unique in this process: workers (a Ray pool outlives a backend: a batch of
+# scenes) recognise the scene they hold by its key.
+_scene_keys = itertools.count(1)
+
+
 class SplitBackend:
     """A backend that renders each pass on all workers of ``pool`` (see the module's
     docstring). ``name``: the workers' backend kind; ``pass_seconds``: what the
@@ -218,14 +224,14 @@ class SplitBackend:
         self.name = name
         self.items_per_worker = items_per_worker
         self.scene = None
-        self._key = 0
+        self._key = None
         self._ship(scene)
         self.items_done = [0] * len(pool)      # samples x rows each worker rendered
         self.compile_seconds = []
         self.rate = None                        # pixel samples per second, all workers
 
     def _ship(self, scene):
-        self._key += 1
+        self._key = (os.getpid(), next(_scene_keys))
         self.base = scene
         self.box = self.pool.box(shippable(scene))
         self.patch = {}

@@ -176,15 +176,19 @@ def test_specialisation_removes_unused_code():
     compiled in a fresh process (the IR of one process depends on what it compiled before)."""
     import subprocess
     import sys
-    sizes = []
+    from concurrent.futures import ThreadPoolExecutor
     # tri lights, then + point lights / constant env / smooth / principled / textures /
     # env map / thin lens (flags in Features order)
-    for flags in ("1000", "1100", "1010", "1001", "10001", "100001", "100000001",
-                  "1000000001"):
+    variants = ("1000", "1100", "1010", "1001", "10001", "100001", "100000001",
+                "1000000001")
+
+    def size(flags):      # (a compile is single-threaded: one process per core)
         r = subprocess.run([sys.executable, "-c", SPECIALISATION_PROBE, ROOT, flags],
                            capture_output=True, text=True, cwd=ROOT, timeout=600)
         assert r.returncode == 0, r.stderr[-2000:]
-        sizes.append(int(r.stdout.split()[-1]))
+        return int(r.stdout.split()[-1])
+    with ThreadPoolExecutor(max(1, min(4, os.cpu_count() or 1))) as pool:
+        sizes = list(pool.map(size, variants))
     assert all(size > sizes[0] for size in sizes[1:]), sizes
 
 
