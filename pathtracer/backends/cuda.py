@@ -10,9 +10,21 @@ and a second kernel adds the slices in a fixed order: the image does not depend 
 timing, and each (pixel, sample) uses the same random numbers as on the CPU.
 """
 import functools
+import os
 
 import numpy as np
 from numba import config, cuda
+
+# Numba warns of "low occupancy" at every launch of fewer than 128 blocks: the compile
+# launches (one block) and small images do that by design, and a user can do nothing about
+# it. (Set in the environment too: Numba re-reads it at every compile.)
+os.environ.setdefault("NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS", "0")
+try:
+    from numba.cuda.core import config as _launch_config   # numba-cuda's own (>= 0.2x)
+except ImportError:
+    _launch_config = config
+for _c in {id(config): config, id(_launch_config): _launch_config}.values():
+    _c.CUDA_LOW_OCCUPANCY_WARNINGS = int(os.environ["NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS"])
 
 from .._cache import jit_cache
 
