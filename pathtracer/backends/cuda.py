@@ -17,14 +17,16 @@ from numba import config, cuda
 
 # Numba warns of "low occupancy" at every launch of fewer than 128 blocks: the compile
 # launches (one block) and small images do that by design, and a user can do nothing about
-# it. (Set in the environment too: Numba re-reads it at every compile.)
-os.environ.setdefault("NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS", "0")
-try:
-    from numba.cuda.core import config as _launch_config   # numba-cuda's own (>= 0.2x)
-except ImportError:
-    _launch_config = config
-for _c in {id(config): config, id(_launch_config): _launch_config}.values():
-    _c.CUDA_LOW_OCCUPANCY_WARNINGS = int(os.environ["NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS"])
+# it. Off unless the user's environment asks for it. Only the config attribute is set:
+# changing a NUMBA_* environment variable makes Numba re-read its whole configuration at
+# the next compile, which would undo the kernel cache folder pathtracer._cache chose.
+if "NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS" not in os.environ:
+    try:
+        from numba.cuda.core import config as _launch_config   # numba-cuda's own config
+    except ImportError:
+        _launch_config = config
+    for _c in {id(config): config, id(_launch_config): _launch_config}.values():
+        _c.CUDA_LOW_OCCUPANCY_WARNINGS = 0
 
 from .._cache import jit_cache
 
