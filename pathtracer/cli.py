@@ -451,28 +451,27 @@ def _main(args):
 
 def _one(args, scene_path, signals):
     """Render one scene of the command line; its exit code."""
-    if True:
-        try:
-            return _render(args, scene_path, signals)
-        except Interrupted as e:
-            print(f"pt-render: interrupted ({signal.Signals(e.signum).name}) before the first "
-                  "pass; nothing written", file=sys.stderr)
-            return e.exit_code
-        except KeyboardInterrupt:
-            print("pt-render: interrupted before the first pass; nothing written",
-                  file=sys.stderr)
-            return 128 + signal.SIGINT
-        except (SceneError, InputError) as e:
-            return _fail(e, args, EXIT_INPUT)
-        except OutputError as e:
-            return _fail(e, args, EXIT_IO)
-        except MemoryError as e:
-            return _fail(f"out of memory ({e or 'allocation failed'}): lower the resolution "
-                         "or the size of the scene's textures and meshes", args, EXIT_INPUT)
-        except Exception as e:
-            return _fail(f"internal error: {type(e).__name__}: {_one_line(e, 300)} (a bug in "
-                         "pt-render: please report it with the scene; --debug shows the "
-                         "traceback)", args, EXIT_INTERNAL)
+    try:
+        return _render(args, scene_path, signals)
+    except Interrupted as e:
+        print(f"pt-render: interrupted ({signal.Signals(e.signum).name}) before the first "
+              "pass; nothing written", file=sys.stderr)
+        return e.exit_code
+    except KeyboardInterrupt:
+        print("pt-render: interrupted before the first pass; nothing written",
+              file=sys.stderr)
+        return 128 + signal.SIGINT
+    except (SceneError, InputError) as e:
+        return _fail(e, args, EXIT_INPUT)
+    except OutputError as e:
+        return _fail(e, args, EXIT_IO)
+    except MemoryError as e:
+        return _fail(f"out of memory ({e or 'allocation failed'}): lower the resolution "
+                     "or the size of the scene's textures and meshes", args, EXIT_INPUT)
+    except Exception as e:
+        return _fail(f"internal error: {type(e).__name__}: {_one_line(e, 300)} (a bug in "
+                     "pt-render: please report it with the scene; --debug shows the "
+                     "traceback)", args, EXIT_INTERNAL)
 
 
 def _one_line(e, limit=None):

@@ -83,7 +83,7 @@ def shippable(scene):
 
 
 class ItemRenderer:
-    """A worker's side: a backend per scene kind, rendering work items. ``fetch(box)``
+    """A worker's side: the backend of its current scene, rendering work items. ``fetch(box)``
     turns the scene box a driver sends into the scene (Ray: the object-store reference is
     read once per scene, not per item)."""
 
@@ -91,7 +91,7 @@ class ItemRenderer:
         self.backend_name = backend_name
         self.device = device
         self.fetch = fetch or (lambda box: box[0])
-        self.backends = {}
+        self.kind = None
         self.scene_key = None
         self.base = None
         self.patch_key = None
@@ -110,13 +110,15 @@ class ItemRenderer:
             if patch:
                 scene = dataclasses.replace(scene, arrays=scene.arrays._replace(**patch))
             kind = (scene.features, scene.width, scene.height)
-            backend = self.backends.get(kind)
-            if backend is None:
+            if self.backend is None or self.kind != kind:
+                # one backend at a time: a kept pool (a batch) does not hold every earlier
+                # scene's arrays (the compiled kernels stay cached per feature set)
                 from .backends import make_backend
-                backend = self.backends[kind] = make_backend(self.backend_name, scene)
-            elif backend.scene is not scene:
-                backend.update(scene)
-            self.backend = backend
+                self.backend = None
+                self.backend = make_backend(self.backend_name, scene)
+                self.kind = kind
+            elif self.backend.scene is not scene:
+                self.backend.update(scene)
             self.patch_key = patch_key
         return self.backend
 
