@@ -28,7 +28,13 @@ VARIANTS = {
     "groups-exact": dict(max_registers=None, fast=False),
     "groups-r64": dict(fast=False),
     "groups-fast": dict(max_registers=None),
-    "default": dict(),                              # groups, 64 registers, approx
+    "default": dict(),              # groups (2^23 threads, 2^21 without an environment),
+    #                                 64 registers, approximate arithmetic
+    # path regeneration (kernels.integrator.regenerates) forced on / off
+    "regen": dict(regenerate=True),                 # 2^21 threads
+    "regen-t2^23": dict(regenerate=True, target_threads=1 << 23),
+    "nested": dict(regenerate=False),               # 2^23 threads
+    "nested-t2^21": dict(regenerate=False, target_threads=1 << 21),
     "r48": dict(max_registers=48),
     "r56": dict(max_registers=56),
     "r72": dict(max_registers=72),
@@ -90,6 +96,8 @@ def main(argv=None):
     p.add_argument("--variants", default="pixel-exact,default")
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--mitsuba", action="store_true")
+    p.add_argument("--sampler", choices=("sobol", "independent"),
+                   help="override the scenes' sampler (default: theirs, sobol)")
     p.add_argument("--json")
     a = p.parse_args(argv)
     rec = {"command": command(), "machine": machine(), "date": now(), "versions": versions(),
@@ -97,6 +105,8 @@ def main(argv=None):
     for name in a.scenes:
         for res, spp in SIZES[name]:
             desc = _describe(name, res)
+            if a.sampler:
+                desc.render.sampler = a.sampler
             scene = compile_scene(desc)
             row = {}
             for v in a.variants.split(","):

@@ -64,20 +64,46 @@ class Results:
 # Error against run time
 
 def convergence_ours(backend_name, name, max_spp, adaptive=None):
-    """(seconds, spp, relMSE) after each progressive pass, compile excluded; ``adaptive``:
+    """(seconds, spp, relMSE) after each progressive pass, in rendering time (compile and
+    the error measurement excluded); ``adaptive``:
     adaptive sampling to that per-pixel relMSE (render's ``adaptive``). Rendered through
     the Python API, as the CLI renders."""
     import pathtracer as pt
     ref, _ = load_reference(name)
     scene = convergence_scene(name)
     points = []
+    measuring = [0.0]   # seconds spent in on_pass so far
 
     def on_pass(p):
-        points.append((p.elapsed, p.spp, relmse(p.image(), ref)))
+        # The render's clock runs on through this callback, so the error measurement of
+        # the earlier passes (the mean image and its relMSE: ~1-10 ms a pass, as long as a
+        # small GPU pass) is taken out of each point's time: the curve is rendering time.
+        t0 = time.perf_counter()
+        points.append((p.elapsed - measuring[0], p.spp, relmse(p.image(), ref)))
+        measuring[0] += time.perf_counter() - t0
 
     # passes of 1, 2, 4, ... spp: the error is measured at doubling sample counts
     pt.render(scene, spp=max_spp, backend=backend_name, callback=on_pass,
               pass_seconds=float("inf"), adaptive=adaptive)
+    return points
+
+
+def convergence_ours_levels(backend_name, name, max_spp):
+    """Rendered as Mitsuba's curve is (convergence_mitsuba): one render of each spp level
+    1, 2, 4, ... alone (seed = spp), timed by the render itself (compile excluded, after a
+    warm-up render), no intermediate images. The progressive curve (convergence_ours)
+    pays for a launch, a copy and an accumulation at every level it passes; this one is
+    what ``pt-render --spp N`` costs."""
+    import pathtracer as pt
+    ref, _ = load_reference(name)
+    scene = convergence_scene(name)
+    pt.render(scene, spp=1, backend=backend_name, seed=99)     # warm-up (kernels, GPU)
+    points = []
+    spp = 1
+    while spp <= max_spp:
+        res = pt.render(scene, spp=spp, backend=backend_name, seed=spp)
+        points.append((res.seconds, spp, relmse(res.image, ref)))
+        spp *= 2
     return points
 
 
@@ -120,6 +146,10 @@ def section_convergence(scenes, backends, mitsuba_variant, max_spp, r):
         for b in backends:
             curves[name, f"pt-render {b}"] = convergence_ours(b, name, max_spp)
             noise[name, f"pt-render {b}"] = meta.get("noise_relmse")
+            # each level alone, as Mitsuba's curve: the same method for both renderers
+            curves[name, f"pt-render {b} per level"] = convergence_ours_levels(b, name,
+                                                                               max_spp)
+            noise[name, f"pt-render {b} per level"] = meta.get("noise_relmse")
         if mitsuba_variant:
             peer = f"Mitsuba {mitsuba_variant}"
             pts = convergence_mitsuba(mitsuba_variant, name, max_spp)
@@ -555,7 +585,10 @@ def summary(r, res, args):
                   "relMSE against each scene's reference, compile excluded. The Cornell box: "
                   "Mitsuba 3's reference (shared/reference) for both renderers. The others: "
                   "each renderer's own high-spp reference (`bench/references/`), so each "
-                  "curve is that renderer's noise alone.", "",
+                  "curve is that renderer's noise alone. `pt-render B`: one progressive "
+                  "render (passes of 1, 2, 4, ... spp, the error measured after each and its "
+                  "time taken out); `pt-render B per level` and Mitsuba: each spp level "
+                  "rendered alone.", "",
                   "| scene | renderer | time to relMSE 1e-2 | time to relMSE 1e-3 | "
                   "last spp | last seconds | last relMSE | reference noise |",
                   "|---|---|---|---|---|---|---|---|"]

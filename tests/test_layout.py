@@ -1,8 +1,8 @@
 """The data contract between host and device (kernels/layout.py) and the code's shape.
 
 - No module but the layout indexes a kernel array's columns with an integer literal.
-- ``render_sample`` stays a short loop over named steps, and ``render_pixel`` a short loop
-  over samples (<= 120 lines each, nesting <= 5).
+- ``render_pixel`` and ``render_sample`` stay short loops over named steps, and the step
+  of one path vertex readable (<= 120 lines each, nesting <= 5).
 - The one material-parameter table agrees with the loader, the compiler's arrays and
   docs/scene-format.md (names, defaults, ranges).
 """
@@ -112,7 +112,7 @@ def _nesting(node, depth=0):
     return deepest
 
 
-@pytest.mark.parametrize("name", ["render_sample", "render_pixel"])
+@pytest.mark.parametrize("name", ["render_pixel", "render_sample", "path_vertex"])
 def test_path_is_short_and_shallow(name):
     fn = _integrator_function(name)
     assert fn.end_lineno - fn.lineno + 1 <= 120

@@ -32,12 +32,19 @@ from .._cache import jit_cache
 
 from ..kernels.constants import STACK_SIZE
 from ..kernels.layout import AOV_WIDTH
-from ..kernels.integrator import SceneArrays, make_aov_pixel, make_render_pixel
+from ..kernels.integrator import SceneArrays, make_aov_pixel, make_render_pixel, regenerates
 
 BLOCK = (16, 8)
 # Threads a launch aims at: several waves of the largest GPUs' resident threads (an H200:
 # 132 SMs x 2,048), so that the blocks that finish late are a small part of the pass.
 TARGET_THREADS = 1 << 23
+# ... or fewer, longer threads where render_pixel regenerates paths (scenes without an
+# environment, kernels.integrator.regenerates): a lane whose path ended starts the thread's
+# next sample, so more samples per thread keep the lanes busy. H100, 2026-11-23
+# (bench/gpu_launch.py): the Cornell box 1024^2 x 64 ran 3 % faster at 2^21 than at 2^23.
+TARGET_THREADS_REGENERATING = 1 << 21
+
+
 # The scratch film holds at most this many (group, pixel) slices of rgb + ray counts.
 MAX_SLICES = 1 << 23
 # Registers per thread: the megakernel wants ~130; capped at 64 (the rest spills to L1)
@@ -52,13 +59,17 @@ FAST_MATH_FLAGS = frozenset({"nsz", "arcp", "contract", "afn", "reassoc"})
 
 
 @functools.lru_cache(maxsize=None)
-def pass_kernel(features, max_registers=None, fast=False):
-    render_pixel = make_render_pixel(features, "cuda")
+def pass_kernel(features, max_registers=None, fast=False, regenerate=None):
+    """The pass kernel for scenes with ``features`` (``regenerate``: force render_pixel's
+    path regeneration on or off; None: kernels.integrator.regenerates)."""
+    if regenerate is None:
+        regenerate = regenerates(features, "cuda")
+    render_pixel = make_render_pixel(features, "cuda", bool(regenerate))
     fastmath = set(FAST_MATH_FLAGS) if fast else False
 
     # Numba's disk cache keys on the kernel's code and closure values, not on the jit
     # options: the options' own key is read below so that each set is cached apart.
-    options_key = (max_registers or 0) * 2 + bool(fast)
+    options_key = ((max_registers or 0) * 2 + bool(fast)) * 2 + bool(regenerate)
 
     # the simulator runs Python: it takes neither option
     options = {} if config.ENABLE_CUDASIM else dict(max_registers=max_registers,
@@ -155,11 +166,15 @@ class CUDABackend:
     name = "cuda"
 
     def __init__(self, scene, block=BLOCK, max_registers=MAX_REGISTERS, fast=True,
-                 target_threads=TARGET_THREADS):
+                 target_threads=None, regenerate=None):
         self.scene = scene
         self.block = tuple(block)
+        if regenerate is None:
+            regenerate = regenerates(scene.features, "cuda")
+        if target_threads is None:
+            target_threads = TARGET_THREADS_REGENERATING if regenerate else TARGET_THREADS
         self.target_threads = target_threads
-        self.kernel = pass_kernel(scene.features, max_registers, bool(fast))
+        self.kernel = pass_kernel(scene.features, max_registers, bool(fast), bool(regenerate))
         self.d_scene = SceneArrays(*[cuda.to_device(a) for a in scene.arrays])
         h, w = scene.height, scene.width
         self.d_out = cuda.device_array((h, w, 3), np.float32)

@@ -59,10 +59,29 @@ HALF_F = np.float32(0.5)
 MIP_LAST_BOUNCE = 1
 
 
+def regenerates(features, target):
+    """Whether ``render_pixel`` for ``target`` runs a pixel's paths with path regeneration
+    (Novak et al. 2010, "Path regeneration for interactive path tracing"): one loop over
+    the vertices of all its paths (``path_vertex``), where the iteration after a path's
+    last vertex starts the next sample, so that a GPU lane whose path ended does not wait
+    for the warp's longest path. On the GPU in scenes without an environment (the Cornell
+    box: +15 %, H100, 2026-11-23, docs/benchmarks.md). Not in scenes with one, whose
+    vertices diverge anyway (the BVH, the principled lobes, the environment's tables):
+    there one path after the other measured 4-9 % faster. Not on the CPU, where a thread
+    runs one path at a time either way and the regenerating loop measured slower (the
+    Cornell box 0.68x, 2-core EPYC, bench.ab). Either way the same samples are added in
+    the same order: the same image."""
+    return target == "cuda" and not specialise(features).any_environment
+
+
 @functools.lru_cache(maxsize=None)
-def make_render_pixel(features, target="cpu"):
-    """Compile-time specialisation: returns ``render_pixel`` for scenes with ``features``."""
-    return make_kernels(features, target)[0]
+def make_render_pixel(features, target="cpu", regenerate=None):
+    """Compile-time specialisation: returns ``render_pixel`` for scenes with ``features``
+    (``regenerate``: path regeneration or not; None: :func:`regenerates`)."""
+    if regenerate is None:
+        regenerate = regenerates(features, target)
+    kernels = make_kernels(features, target)
+    return kernels[0] if regenerate else kernels[2]
 
 
 @functools.lru_cache(maxsize=None)
@@ -74,7 +93,8 @@ def make_aov_pixel(features, target="cpu"):
 
 @functools.lru_cache(maxsize=None)
 def make_kernels(features, target="cpu"):
-    """Compile-time specialisation: (render_pixel, aov_pixel) for scenes with ``features``."""
+    """Compile-time specialisation: (render_pixel with path regeneration, aov_pixel,
+    render_pixel_nested: one path after the other) for scenes with ``features``."""
     S = specialise(features)
     step = step_marker(target)
     entry = entry_marker(target)
@@ -108,6 +128,27 @@ def make_kernels(features, target="cpu"):
         return pinhole_ray(cam, np.float32(px), np.float32(py), draw(state, dims, D_PIXEL_X),
                            draw(state, dims, D_PIXEL_Y), np.float32(width),
                            np.float32(height))
+
+    @step
+    def start_camera_path(cam, px, py, state, width, height):
+        """A path's state at its camera ray: (o, d, beta, radiance, pdf_prev, skip,
+        bounce, cone)."""
+        o, d = camera_ray(cam, px, py, state, width, height)
+        # beta: the throughput, product of f cos / pdf (and 1/q of RR); pdf_prev: the
+        # solid-angle pdf of the BSDF sample that made the ray, 0 for the camera ray
+        # (emission seen directly: no MIS); skip: the triangle the ray leaves (never
+        # re-hit), -1 none; bounce: scattering events so far; cone: the ray cone's width
+        # at o (mip-mapped textures only)
+        return o, d, (ONE, ONE, ONE), (ZERO, ZERO, ZERO), ZERO, -1, 0, ZERO
+
+    @step
+    def store_pixel(out, stats, px, py, r, g, b, n_bounce_rays, n_shadow_rays, n_bad):
+        out[py, px, 0] = r
+        out[py, px, 1] = g
+        out[py, px, 2] = b
+        stats[py, px, STAT_BOUNCE_RAYS] = n_bounce_rays
+        stats[py, px, STAT_SHADOW_RAYS] = n_shadow_rays
+        stats[py, px, STAT_NONFINITE] = n_bad
 
     @step
     def russian_roulette(beta, bounce, rr_depth, state, dim):
@@ -155,11 +196,147 @@ def make_kernels(features, target="cpu"):
             weight = power_heuristic(pdf_light, pdf_bsdf) / pdf_light
         return scale(mul(mul(beta, f), le), weight), 1
 
+    @step
+    def path_vertex(o, d, beta, radiance, pdf_prev, skip, bounce, cone, spread, state,
+                    max_bounces, rr_depth, scene, stack):
+        """One vertex of a path: the ray (o, d) traced, the emitter it reaches added
+        (MIS-weighted), then at a surface next-event estimation and the BSDF sample that
+        makes the next ray. Returns the path's new (o, d, beta, radiance, pdf_prev, skip,
+        bounce, cone), the shadow rays traced, the bounce rays made (1 once a BSDF sample
+        made the next ray, counted even where Russian roulette then ends the path) and
+        whether the path goes on."""
+        n_shadow_rays = 0
+        t, tri, b1, b2 = closest_hit(o, d, INF, skip, scene.tri_v, scene.bvh_box,
+                                     scene.bvh_child, stack)
+        if tri < 0:
+            if ANY_ENVIRONMENT:
+                le, weight = escaped(scene.env, scene.env_img, scene.env_pdf,
+                                     scene.env_info, d, pdf_prev)
+                radiance = add(radiance, scale(mul(beta, le), weight))
+            return o, d, beta, radiance, pdf_prev, skip, bounce, cone, 0, 0, False
+        # ---- the surface hit ----
+        v0 = load3(scene.tri_v, tri, TRI_V0)
+        e1 = load3(scene.tri_v, tri, TRI_E1)
+        e2 = load3(scene.tri_v, tri, TRI_E2)
+        p = madd(madd(v0, e1, b1), e2, b2)
+        ng = normalize(cross(e1, e2))   # front side: counter-clockwise winding
+        wo = neg(d)
+        m = scene.tri_mat[tri]
+        tu, tv = tri_uv_at(scene.tri_uv, tri, b1, b2)
+        fp = NO_FOOTPRINT
+        if MIPMAPS:
+            if bounce <= MIP_LAST_BOUNCE:
+                cone, fp = footprint(scene.tri_uv, tri, e1, e2, ng, d, t, cone, spread)
+        if TRI_LIGHTS:
+            le, weight, hit_light = hit_emission(
+                scene.mat, scene.mat_tex, scene.tex_data, scene.tex_int, scene.tex_f,
+                scene.tri_light_pdf, tri, m, dot(ng, wo), t, pdf_prev, tu, tv, fp)
+            if hit_light:
+                radiance = add(radiance, scale(mul(beta, le), weight))
+        if bounce >= max_bounces:
+            return o, d, beta, radiance, pdf_prev, skip, bounce, cone, 0, 0, False
+        is_principled, params = material_at(scene.mat, scene.mat_tex, scene.tex_data,
+                                            scene.tex_int, scene.tex_f, m, tu, tv, fp)
+        ng, ns, tangent, bitangent, wp = shading_frame(
+            scene.tri_n, scene.tri_t, scene.mat_tex, scene.tex_data, scene.tex_int,
+            scene.tex_f, tri, m, b1, b2, e1, ng, wo, params[P_TRANSMISSION] > ZERO, tu, tv,
+            fp)
+        wo_l = local_wo(wo, tangent, bitangent, ns)
+        origin = ray_origin(scene.tri_n, tri, p, b1, b2, v0, e1, e2, ng)
+        ng_tri = ng
+        ng = side_normal(ng, ns, wp)
+        dim = D_FIRST_BOUNCE + bounce * DIMS_PER_BOUNCE
+        # ---- next-event estimation: one emitter sample, one shadow ray ----
+        if NEE:
+            dims = open_set(state, dim + D_LIGHT_U)
+            wi, t_max, le, pdf_light, is_delta, light_tri = sample_emitter(
+                scene, p, draw(state, dims, dim + D_LIGHT_SELECT),
+                draw(state, dims, dim + D_LIGHT_U), draw(state, dims, dim + D_LIGHT_V))
+            if pdf_light > ZERO:
+                contribution, traced = direct_light(
+                    beta, is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, wp,
+                    ng_tri, p, origin, tri, wi, t_max, le, pdf_light, is_delta, light_tri,
+                    scene.tri_v, scene.bvh_box, scene.bvh_child, scene.env_img,
+                    scene.env_info, stack)
+                radiance = add(radiance, contribution)
+                n_shadow_rays += traced
+        # ---- BSDF sampling: the next ray ----
+        dims = open_set(state, dim + D_BSDF_U)
+        wi, weight, pdf_bsdf = sample_world(
+            is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, wp,
+            draw(state, dims, dim + D_BSDF_LOBE), draw(state, dims, dim + D_BSDF_U),
+            draw(state, dims, dim + D_BSDF_V))
+        if not (pdf_bsdf > ZERO):
+            return o, d, beta, radiance, pdf_prev, skip, bounce, cone, n_shadow_rays, 0, False
+        beta = mul(beta, weight)
+        pdf_prev = pdf_bsdf
+        o = leave(p, ng, wi, origin)
+        d = wi
+        skip = own_skip(tri, ng_tri, ng, wi)
+        bounce += 1
+        beta, alive = russian_roulette(beta, bounce, rr_depth, state, dim)
+        return o, d, beta, radiance, pdf_prev, skip, bounce, cone, n_shadow_rays, 1, alive
+
+    @step
+    def add_sample(r, g, b, n_bad, radiance):
+        """The pixel's sums with one path's radiance added: a NaN or infinite sample is
+        counted and left out of the sum (as zero), so that one bad path does not turn its
+        pixel, and the image file, into NaN; the count makes it visible instead (the
+        command warns, the tests require it to be zero)."""
+        sr, sg, sb = radiance
+        if math.isfinite(sr) and math.isfinite(sg) and math.isfinite(sb):
+            return r + sr, g + sg, b + sb, n_bad
+        return r, g, b, n_bad + 1
+
+    @entry
+    def render_pixel(px, py, sample_start, n_samples, seed, max_bounces, rr_depth, scene,
+                     stack, out, stats):
+        """Add the paths of samples [sample_start, + n_samples) of pixel (px, py) to
+        out[py, px] (float32 rgb sums, in sample order; see add_sample) and count rays and
+        non-finite samples in stats[py, px] (layout STAT_*). One loop over the vertices of
+        all the paths, with path regeneration (see regenerates; render_pixel_nested is
+        the other way)."""
+        width = out.shape[1]
+        spread = ZERO
+        if MIPMAPS:
+            spread = scene.cam[CAM_CONE]
+        r, g, b = ZERO, ZERO, ZERO      # the pixel's sums
+        n_bad = 0
+        n_bounce_rays = 0
+        n_shadow_rays = 0
+        # the path under way: started at the top of the loop whenever alive is False
+        state = start_path(py * width + px, sample_start, seed)
+        o = d = beta = radiance = (ZERO, ZERO, ZERO)
+        pdf_prev = cone = ZERO
+        skip = bounce = 0
+        alive = False
+        started = 0                     # paths started
+        while True:
+            if not alive:
+                if started > 0:
+                    r, g, b, n_bad = add_sample(r, g, b, n_bad, radiance)
+                if started == n_samples:
+                    break
+                state = start_path(py * width + px, sample_start + started, seed)
+                started += 1
+                o, d, beta, radiance, pdf_prev, skip, bounce, cone = start_camera_path(
+                    scene.cam, px, py, state, width, out.shape[0])
+            (o, d, beta, radiance, pdf_prev, skip, bounce, cone, shadow_rays, bounce_rays,
+             alive) = path_vertex(o, d, beta, radiance, pdf_prev, skip, bounce, cone, spread,
+                                  state, max_bounces, rr_depth, scene, stack)
+            n_shadow_rays += shadow_rays
+            n_bounce_rays += bounce_rays
+        store_pixel(out, stats, px, py, r, g, b, n_bounce_rays, n_shadow_rays, n_bad)
+
     @entry
     def render_sample(px, py, sample_index, seed, width, height, max_bounces, rr_depth,
                       scene, stack):
         """Radiance (r, g, b) of one camera path through pixel (px, py), with the number of
-        bounce rays and shadow rays it traced."""
+        bounce rays and shadow rays it traced: render_pixel_nested's path, path_vertex's
+        steps written out in one loop. On the GPU, in the scenes that run one path after
+        the other (see regenerates), this loop compiles 4-7 % faster than path_vertex
+        called in it, although NVVM inlines both completely (H100, 2026-11-23); the two
+        are kept equal by tests/test_render.py (the same image, bit for bit)."""
         state = start_path(py * width + px, sample_index, seed)
         o, d = camera_ray(scene.cam, px, py, state, width, height)
         beta = (ONE, ONE, ONE)      # path throughput: product of f cos / pdf (and 1/q of RR)
@@ -250,44 +427,22 @@ def make_kernels(features, target="cpu"):
         return radiance[0], radiance[1], radiance[2], n_bounce_rays, n_shadow_rays
 
     @entry
-    def render_pixel(px, py, sample_start, n_samples, seed, max_bounces, rr_depth, scene,
-                     stack, out, stats):
-        """Add n_samples paths of pixel (px, py) to out[py, px] (float32 rgb sums) and
-        count rays and non-finite samples in stats[py, px] (layout STAT_*). A NaN or
-        infinite sample is counted and left out of the sum (as zero): one bad path must not
-        turn its pixel, and the image file, into NaN; the count makes it visible instead
-        (the command warns, the tests require it to be zero).
-
-        One path after the other. Path regeneration (one loop over the vertices of all the
-        samples, so that a GPU lane whose path ended starts its next sample at once; Novak
-        et al. 2010) was measured on an H100 (2026-11-23, bench/gpu_launch.py): +9 % on the
-        Cornell box but -6 to -9 % on the HDRI scenes, so it is not used; a path step
-        function called in the loop cost 4-5 % on the GPU against the body written out."""
+    def render_pixel_nested(px, py, sample_start, n_samples, seed, max_bounces, rr_depth,
+                            scene, stack, out, stats):
+        """render_pixel's sums one path after the other (see regenerates)."""
         height = out.shape[0]
         width = out.shape[1]
-        r = ZERO
-        g = ZERO
-        b = ZERO
+        r, g, b = ZERO, ZERO, ZERO
+        n_bad = 0
         n_bounce = 0
         n_shadow = 0
-        n_bad = 0
         for s in range(sample_start, sample_start + n_samples):
             sr, sg, sb, nb, ns = render_sample(px, py, s, seed, width, height, max_bounces,
                                                rr_depth, scene, stack)
-            if math.isfinite(sr) and math.isfinite(sg) and math.isfinite(sb):
-                r += sr
-                g += sg
-                b += sb
-            else:
-                n_bad += 1
+            r, g, b, n_bad = add_sample(r, g, b, n_bad, (sr, sg, sb))
             n_bounce += nb
             n_shadow += ns
-        out[py, px, 0] = r
-        out[py, px, 1] = g
-        out[py, px, 2] = b
-        stats[py, px, STAT_BOUNCE_RAYS] = n_bounce
-        stats[py, px, STAT_SHADOW_RAYS] = n_shadow
-        stats[py, px, STAT_NONFINITE] = n_bad
+        store_pixel(out, stats, px, py, r, g, b, n_bounce, n_shadow, n_bad)
 
     @entry
     def aov_pixel(px, py, n_samples, seed, scene, stack, out):
@@ -369,4 +524,4 @@ def make_kernels(features, target="cpu"):
             out[py, px, AOV_ALBEDO + c] = acc[c] * inv
             out[py, px, AOV_NORMAL + c] = nacc[c] * inv
 
-    return render_pixel, aov_pixel
+    return render_pixel, aov_pixel, render_pixel_nested
