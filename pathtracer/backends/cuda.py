@@ -43,8 +43,6 @@ TARGET_THREADS = 1 << 23
 # next sample, so more samples per thread keep the lanes busy. H100, 2026-11-23
 # (bench/gpu_launch.py): the Cornell box 1024^2 x 64 ran 3 % faster at 2^21 than at 2^23.
 TARGET_THREADS_REGENERATING = 1 << 21
-
-
 # The scratch film holds at most this many (group, pixel) slices of rgb + ray counts.
 MAX_SLICES = 1 << 23
 # Registers per thread: the megakernel wants ~130; capped at 64 (the rest spills to L1)
