@@ -47,7 +47,7 @@ def difference(a, b):
             "relmse_between": float(np.mean((a - b) ** 2 / (a * a + 0.01)))}
 
 
-def run(mode, scenes, repeats, workers):
+def run(mode, scenes, repeats, workers, spp_scale=1):
     import pathtracer as pt
     record = {"command": command(), "machine": machine(), "date": now(),
               "versions": versions(), "mode": mode, "scenes": {}}
@@ -67,6 +67,7 @@ def run(mode, scenes, repeats, workers):
         split = dict(ray="local", ray_workers=workers)
     for name in scenes:
         res, spp = SETTINGS[mode][name]
+        spp = int(spp * spp_scale)
         scene = load(name, res)
         row = {"resolution": list(res), "spp": spp, "one": [], "split": []}
         warm = {}
@@ -107,10 +108,14 @@ def main(argv=None):
     p.add_argument("--scenes", nargs="+", default=None)
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--spp-scale", type=float, default=1,
+                   help="renders this many times longer (the steady state of long renders: "
+                        "the first passes of a render are short and each pass costs a "
+                        "synchronisation of the workers)")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
     scenes = args.scenes or list(SETTINGS[args.mode])
-    record = run(args.mode, scenes, args.repeats, args.workers)
+    record = run(args.mode, scenes, args.repeats, args.workers, args.spp_scale)
     out = args.out or os.path.join(ROOT, "bench", "results", f"distributed-{args.mode}.json")
     with open(out, "w") as f:
         json.dump(record, f, indent=1)

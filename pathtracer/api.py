@@ -24,9 +24,12 @@ from .scene.loader import SAMPLERS, TONEMAPS, describe, read_scene_data
 
 DICT_NAME = "<scene dict>"     # how error messages name a scene given as a dict
 # Paths in the first pass of a render without a callback, per backend: large enough that a
-# small GPU re-render is one launch (each pass costs a launch, a sum and a copy: ~1-2 ms),
-# small enough that Ctrl-C is answered within a fraction of a second.
-FIRST_PASS_PATHS = {"cuda": 1 << 20, "cpu": 1 << 17}
+# small GPU re-render is one launch and that the passes of a large one do not start at a
+# few ms of work (each pass costs a launch, a copy and the film's sum: ~8 ms for a 1024^2
+# image on an H200, measured 2026-11-24), small enough that Ctrl-C is answered within a
+# fraction of a second (2^23 paths: ~10-30 ms on an H100). A split render's workers take
+# this each (distribute.SplitBackend.first_pass_paths).
+FIRST_PASS_PATHS = {"cuda": 1 << 23, "cpu": 1 << 17}
 
 
 # ---------------------------------------------------------------------------------------
@@ -540,7 +543,8 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
     if callback is None and time is None and spp is not None:
         # Nobody sees the intermediate images: start with a pass of up to FIRST_PASS_PATHS
         # paths (a power of 2 spp), so a small re-render is one or two launches, not log2(spp).
-        while first_pass * 2 <= spp and first_pass * 2 * pixels <= FIRST_PASS_PATHS.get(be.name, 0):
+        most = getattr(be, "first_pass_paths", FIRST_PASS_PATHS.get(be.name, 0))
+        while first_pass * 2 <= spp and first_pass * 2 * pixels <= most:
             first_pass *= 2
     before = (0, 0, 0) if film is None else (film.camera_rays, film.bounce_rays,
                                              film.shadow_rays)

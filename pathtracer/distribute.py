@@ -161,6 +161,14 @@ class ItemRenderer:
         return self._use(scene_key, box, patch_key, patch).aovs(n_samples, seed)
 
 
+def _render_float64(worker, *args):
+    """A local GPU worker's item with its sums already float64: the conversion runs in the
+    worker's thread (NumPy releases the GIL), not in the driver's, which then only copies
+    or adds (measured: the driver's per-pass work is what the GPUs wait for)."""
+    sums, counts = worker.render(*args)
+    return sums.astype(np.float64), counts
+
+
 class ThreadPool:
     """Local workers, one thread each (every GPU's CUDA context and backend live in its
     thread). CPU workers take turns (a CPU backend already uses every core, and Numba's
@@ -183,6 +191,8 @@ class ThreadPool:
     def submit(self, w, method, *args):
         worker = self.workers[w]
         if self.kinds[w][0] == "cuda":
+            if method == "render":
+                return self.executors[w].submit(_render_float64, worker, *args)
             return self.executors[w].submit(getattr(worker, method), *args)
 
         def locked():
@@ -231,6 +241,7 @@ class SplitBackend:
         self.items_done = [0] * len(pool)      # samples x rows each worker rendered
         self.compile_seconds = []
         self.rate = None                        # pixel samples per second, all workers
+        self._total = None                      # the pass sums, reused (see render_pass)
 
     def _ship(self, scene):
         self._key = (os.getpid(), next(_scene_keys))
@@ -272,8 +283,16 @@ class SplitBackend:
     def aovs(self, n_samples, seed):
         return self.pool.result(self.pool.submit(0, "aovs", *self._args(), n_samples, seed))
 
+    @property
+    def first_pass_paths(self):
+        """Paths a first pass may take when nobody sees the intermediate images (see
+        api.render): every worker's share, as for one device of its kind."""
+        from .api import FIRST_PASS_PATHS
+        return FIRST_PASS_PATHS.get(self.name, 0) * len(self.pool)
+
     def render_pass(self, sample_start, n_samples, seed, max_bounces, rr_depth, active=None):
-        """The pass's sums (float64 H x W x 3) and ray counts (1 x 1 x 3)."""
+        """The pass's sums (float64 H x W x 3: a buffer reused by the next pass, as the
+        CUDA backend's is) and ray counts (1 x 1 x 3)."""
         h, w = self.scene.height, self.scene.width
         workers = len(self.pool)
         per_worker = 1
@@ -282,7 +301,13 @@ class SplitBackend:
             per_worker = int(min(self.items_per_worker, max(1, seconds / MIN_ITEM_SECONDS)))
         items = split_pass(h, sample_start, n_samples, per_worker * workers)
         t0 = time.perf_counter()
-        total = np.zeros((h, w, 3), np.float64)
+        if self._total is None or self._total.shape != (h, w, 3):
+            self._total = np.empty((h, w, 3), np.float64)
+        total = self._total
+        # The first items cut by rows (one sample chunk) cover every row once: they are
+        # copied, not added to zeros (0 + x is x: the same sums, without a 24 MB fill per
+        # pass of a 1024^2 image).
+        first_chunk = sum(1 for it in items if it.sample0 == items[0].sample0)
         stats = np.zeros(3, np.int64)
         args = self._args()
         queue = list(range(len(items)))[::-1]      # popped from the end: item order
@@ -314,7 +339,10 @@ class SplitBackend:
             while added in results:                 # in item order: a fixed rounding
                 it = items[added]
                 sums, counts = results.pop(added)
-                total[it.row0:it.row1] += sums
+                if added < first_chunk:
+                    total[it.row0:it.row1] = sums
+                else:
+                    total[it.row0:it.row1] += sums
                 stats += counts
                 added += 1
         if active is None and n_samples > 0:
