@@ -2,6 +2,7 @@
 import numpy as np
 from numba import njit
 
+from pathtracer.kernels import rng as bits
 from pathtracer.kernels.rng import path_key, pcg_hash, sample_1d
 from tests.helpers import GOLDEN, golden_python_values as _python_values
 
@@ -37,6 +38,40 @@ def test_python_and_cpu_agree_bit_for_bit():
     assert np.array_equal(py, cpu)
     assert np.all((py >= 0) & (py < 1))
     assert len(set(py.tolist())) == len(py)
+
+
+@njit(cache=True)
+def _compiled_bits(xs, seeds):
+    out = np.empty((len(xs), 6), np.uint64)
+    for i in range(len(xs)):
+        x = xs[i]
+        out[i, 0] = bits.pcg_hash(x)
+        out[i, 1] = bits.reverse_bits(x)
+        out[i, 2] = bits.lk_permutation(x, seeds[i])
+        out[i, 3] = bits.lowest_bit(x | np.uint64(1) << np.uint64(31))
+        out[i, 4] = bits.clear_lowest_bit(x | np.uint64(1) << np.uint64(31))
+        out[i, 5] = bits.owen_scramble(x, seeds[i])
+    return out
+
+
+def test_32_bit_ir_equals_the_python_bodies(rng):
+    """The hashes compile to 32-bit LLVM IR (rng._ir32) and run as their plain Python bodies
+    when interpreted: both must give every bit the same, at the edges of 32 bits too."""
+    xs = np.array([0, 1, 2, 2**31, 2**32 - 1] + rng.integers(0, 2**32, 3000).tolist(),
+                  np.uint64)
+    seeds = np.array([2**32 - 1, 0, 7, 1, 2**31] + rng.integers(0, 2**32, 3000).tolist(),
+                     np.uint64)
+    got = _compiled_bits(xs, seeds)
+    for i, (x, seed) in enumerate(zip(xs, seeds)):
+        high = x | np.uint64(1) << np.uint64(31)
+        want = [bits.pcg_hash(x), bits.reverse_bits(x), bits.lk_permutation(x, seed),
+                bits.lowest_bit(high), bits.clear_lowest_bit(high), bits.owen_scramble(x, seed)]
+        assert [int(v) for v in got[i]] == [int(v) for v in want], (int(x), int(seed))
+    # known values: reverse_bits(2) = 2**30; 0 | 2**31: lowest bit 31, cleared 0;
+    # 1 | 2**31: lowest bit 0, cleared 2**31
+    assert int(got[2, 1]) == 2**30
+    assert [int(v) for v in got[0, 3:5]] == [31, 0]
+    assert [int(v) for v in got[1, 3:5]] == [0, 2**31]
 
 
 def test_uniform_pairs_chi2():

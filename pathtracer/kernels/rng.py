@@ -5,9 +5,15 @@ between calls, so CPU threads, CUDA threads and the interpreted backend all draw
 stream, and any single path can be replayed alone (``--backend python --pixel``).
 
 The hash is PCG's output permutation used as a hash (Jarzynski & Olano 2020, "Hash
-Functions for GPU Rendering", JCGT 9(3)). Arithmetic is on uint64 holding 32-bit values,
-masked after every step: compiled code and interpreted NumPy then agree bit for bit, and no
-int64 operand sneaks in (int64 op uint64 is typed float64 by Numba).
+Functions for GPU Rendering", JCGT 9(3)). Values are uint64 holding 32 bits, masked after
+every step: compiled code and interpreted NumPy then agree bit for bit, and no int64 operand
+sneaks in (int64 op uint64 is typed float64 by Numba). Numba types every integer operation
+64-bit, and LLVM keeps the masked 64-bit multiplies and shifts (half of the GPU kernel's
+instructions were 64-bit integer ones, each two or more 32-bit instructions on the GPU), so
+the hashes themselves are written for compiled code in 32-bit LLVM IR (``_ir32``: the same
+arithmetic modulo 2**32, one ``brev.b32`` for a bit reversal); the plain Python bodies
+below are what the interpreted backend and the CUDA simulator run, and the tests check
+that both agree.
 
 Two samplers draw from these hashes (``make_sampler``): ``independent`` (one hash per
 dimension, as pbrt's IndependentSampler) and ``sobol``, the default: Owen-scrambled Sobol
@@ -20,7 +26,12 @@ the sobol sampler draws each set from the 4-D Sobol sequence with its own index 
 scattering event then has two sets, the light sample (position u, v, light pick) and the BSDF
 sample (direction u, v, lobe pick, Russian roulette).
 """
+import inspect
+
 import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.extending import intrinsic, overload
 
 from .device import device
 
@@ -36,7 +47,52 @@ _S28 = np.uint64(28)
 _TO_UNIT = np.float32(1.0 / 16777216.0)
 
 
-@device
+_I32 = ir.IntType(32)
+_I64 = ir.IntType(64)
+
+
+def _ir32(body):
+    """Compile the decorated plain-Python function (uint64 arguments below 2**32, a uint64
+    result below 2**32) through ``body(builder, *i32 values) -> i32 value`` in compiled
+    code: the arguments are truncated to i32, the result zero-extended to uint64. The
+    Python function stays what the interpreted backend calls."""
+    def wrap(fn):
+        nargs = fn.__code__.co_argcount
+
+        def typer(typingctx, *args):
+            if len(args) != nargs or not all(isinstance(a, types.Integer) for a in args):
+                return None
+            sig = types.uint64(*args)
+
+            def codegen(context, builder, signature, values):
+                r = body(builder, *[builder.trunc(v, _I32) if v.type.width > 32 else
+                                    builder.zext(v, _I32) if v.type.width < 32 else v
+                                    for v in values])
+                return builder.zext(r, _I64)
+            return sig, codegen
+        typer.__name__ = f"_{fn.__name__}_ir32"
+        # (intrinsic reads the typing function's signature: the context, then the arguments)
+        typer.__signature__ = inspect.Signature(
+            [inspect.Parameter(n, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+             for n in ("typingctx",) + fn.__code__.co_varnames[:nargs]])
+        compiled = intrinsic(typer)
+        overload(fn, strict=False)(lambda *args: (lambda *a: compiled(*a)))
+        return fn
+    return wrap
+
+
+def _c(v):
+    return ir.Constant(_I32, int(v))
+
+
+def _pcg_ir(b, x):
+    state = b.add(b.mul(x, _c(_MUL)), _c(_INC))
+    shift = b.add(b.lshr(state, _c(28)), _c(4))
+    word = b.mul(b.xor(b.lshr(state, shift), state), _c(_MUL2))
+    return b.xor(b.lshr(word, _c(22)), word)
+
+
+@_ir32(_pcg_ir)
 def pcg_hash(x):
     """32-bit -> 32-bit hash; x is a uint64 below 2**32."""
     state = (x * _MUL + _INC) & M32
@@ -110,7 +166,11 @@ _SET_MUL = np.uint64(0x85EBCA6B)   # odd constants spreading set and dimension n
 _DIM_MUL = np.uint64(0xC2B2AE35)
 
 
-@device
+def _brev_ir(b, x):
+    return b.call(b.module.declare_intrinsic("llvm.bitreverse", [_I32]), [x])
+
+
+@_ir32(_brev_ir)
 def reverse_bits(x):
     """The 32 bits of x (a uint64 below 2**32) in reverse order."""
     x = ((x >> _B1) & _MASK1) | ((x & _MASK1) << _B1)
@@ -120,11 +180,41 @@ def reverse_bits(x):
     return ((x >> _B16) | (x << _B16)) & M32
 
 
+def _cttz_ir(b, x):
+    i1 = ir.IntType(1)
+    cttz = b.module.declare_intrinsic("llvm.cttz", [_I32], ir.FunctionType(_I32, [_I32, i1]))
+    return b.call(cttz, [x, ir.Constant(i1, 1)])     # (1: x is never 0)
+
+
+@_ir32(_cttz_ir)
+def lowest_bit(x):
+    """The number of the lowest set bit of x (a uint64 in (0, 2**32))."""
+    return np.uint64((int(x) & -int(x)).bit_length() - 1)
+
+
+def _blsr_ir(b, x):
+    return b.and_(x, b.sub(x, _c(1)))
+
+
+@_ir32(_blsr_ir)
+def clear_lowest_bit(x):
+    """x (a uint64 in (0, 2**32)) without its lowest set bit."""
+    return x & (x - _K1)
+
+
 SOBOL_MATRIX_REVERSED = np.array([[int(f"{int(v):032b}"[::-1], 2) for v in row]
                                   for row in SOBOL_MATRIX], np.uint64)
 
 
-@device
+def _lk_ir(b, x, seed):
+    x = b.xor(x, b.mul(x, _c(_LK0)))
+    x = b.add(x, seed)
+    x = b.mul(x, b.or_(b.lshr(seed, _c(16)), _c(1)))
+    x = b.xor(x, b.mul(x, _c(_LK1)))
+    return b.xor(x, b.mul(x, _c(_LK2)))
+
+
+@_ir32(_lk_ir)
 def lk_permutation(x, seed):
     """The Owen scramble in bit-reversed order (x and the result reversed): every step
     changes a bit only as a function of the bits below it (x * even, + seed, * odd), i.e. of
@@ -158,22 +248,22 @@ def sobol_set(pix, index_reversed, dset):
     points by a constant XOR (Sobol points are linear in the index's bits), a digital shift
     that the output scramble (sobol_component) absorbs: the estimator is the same in
     distribution as Burley's. All of it runs in reversed bit order (as Cycles does), which
-    saves reversing the index and the coordinates back and forth."""
+    saves reversing the index and the coordinates back and forth; the shuffled index is
+    reversed back once, to visit only its set bits."""
     seed = pcg_hash((pix + (np.uint64(dset) + _K1) * _SET_MUL) & M32)
     t = lk_permutation(index_reversed, seed) ^ lk_permutation(np.uint64(0), seed)
+    u = reverse_bits(t)     # the shuffled index: one matrix column per set bit
     x0 = np.uint64(0)
     x1 = np.uint64(0)
     x2 = np.uint64(0)
     x3 = np.uint64(0)
-    k = 0
-    while t != 0:   # bit 31 - k of t is bit k of the shuffled index
-        if t & _TOP:
-            x0 ^= SOBOL_MATRIX_REVERSED[0, k]
-            x1 ^= SOBOL_MATRIX_REVERSED[1, k]
-            x2 ^= SOBOL_MATRIX_REVERSED[2, k]
-            x3 ^= SOBOL_MATRIX_REVERSED[3, k]
-        t = (t << _K1) & M32
-        k += 1
+    while u != 0:
+        k = lowest_bit(u)
+        x0 ^= SOBOL_MATRIX_REVERSED[0, k]
+        x1 ^= SOBOL_MATRIX_REVERSED[1, k]
+        x2 ^= SOBOL_MATRIX_REVERSED[2, k]
+        x3 ^= SOBOL_MATRIX_REVERSED[3, k]
+        u = clear_lowest_bit(u)
     return x0, x1, x2, x3, seed
 
 
