@@ -179,9 +179,11 @@ def build_parser():
     p.add_argument("--max-bounces", type=_integer(0, limits.MAX_BOUNCES),
                    help="override render.maxBounces")
     p.add_argument("--adaptive", type=_target, metavar="RELMSE",
-                   help="adaptive sampling: a pixel stops taking samples once its estimated "
-                        "relMSE is below RELMSE (e.g. 1e-3; after 16 spp); the render ends "
-                        "when all have, or at --spp / --time")
+                   help="adaptive sampling to an image relMSE of RELMSE (e.g. 1e-3): after "
+                        "16 spp a pixel stops once its estimated relMSE is below its share "
+                        "of RELMSE (noisier pixels get a larger share, so samples go where "
+                        "they lower the image's error most); the render ends when all have, "
+                        "or at --spp / --time")
     p.add_argument("--denoise", action="store_true",
                    help="denoise with Open Image Denoise (CPU), guided by albedo and normal "
                         "images: OUTPUT is the denoised image, OUTPUT_STEM-raw.EXT the raw one")
@@ -724,7 +726,7 @@ def _render(args, scene_path, signals):
         done = float((film.count < film.spp).mean())
         print(f"pt-render: adaptive: {film.count.mean():.1f} spp per pixel on average "
               f"(min {film.count.min()}, max {film.count.max()}); {100 * done:.1f} % of the "
-              f"pixels stopped below relMSE {args.adaptive:g}", file=log)
+              f"pixels stopped (target image relMSE {args.adaptive:g})", file=log)
     if denoise_seconds:
         print(f"pt-render: denoised {len(denoise_seconds)} time(s), the last in "
               f"{denoise_seconds[-1]:.2f} s (Open Image Denoise, CPU)", file=log)

@@ -47,13 +47,14 @@ class Film:
         STAT_*); ``active``: the pixels that took part (None: all); ``half_b``: the pass is
         the second half of an adaptive pass."""
         self.sum += pass_sum
-        self.count += n_samples if active is None else n_samples * (active != 0)
+        added = n_samples if active is None else n_samples * (active != 0)
+        self.count += added
         if half_b:
             if self.sum_b is None:
                 self.sum_b = np.zeros_like(self.sum)
                 self.count_b = np.zeros_like(self.count)
             self.sum_b += pass_sum
-            self.count_b += n_samples if active is None else n_samples * (active != 0)
+            self.count_b += added
         self.spp += n_samples
         # One channel at a time: a strided int64 reduction over (N, 3) is ~6x slower, and
         # this runs after every pass (a GPU pass of a small image takes a few ms).

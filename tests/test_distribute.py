@@ -73,8 +73,8 @@ def test_split_render_equals_one_device(sampler):
 
 def test_split_adaptive_equals_one_device():
     scene = cornell()
-    a = pt.render(scene, spp=128, backend="cpu", adaptive=0.02)
-    b = pt.render(scene, spp=128, backend="cpu", adaptive=0.02, devices=[0, 1])
+    a = pt.render(scene, spp=128, backend="cpu", adaptive=0.005)
+    b = pt.render(scene, spp=128, backend="cpu", adaptive=0.005, devices=[0, 1])
     assert a.film.count.min() < a.spp          # some pixels stopped early
     assert_same_render(a, b)
 
