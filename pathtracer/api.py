@@ -540,7 +540,8 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
     if pass_seconds is None:
         pass_seconds = getattr(be, "pass_seconds", 0.25 if be.name == "cuda" else 0.5)
     first_pass = 1
-    if callback is None and time is None and spp is not None:
+    headless = callback is None and time is None and spp is not None
+    if headless:
         # Nobody sees the intermediate images: start with a pass of up to FIRST_PASS_PATHS
         # paths (a power of 2 spp), so a small re-render is one or two launches, not log2(spp).
         most = getattr(be, "first_pass_paths", FIRST_PASS_PATHS.get(be.name, 0))
@@ -551,7 +552,7 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
     r = progressive(c, be, spp=spp, time_limit=time, seed=seed, max_bounces=max_bounces,
                     pass_seconds=pass_seconds, on_pass=on_pass if callback else None,
                     adaptive=adaptive, first_pass=first_pass, film=film,
-                    footprint_spp=footprint_spp)
+                    footprint_spp=footprint_spp, headless=headless)
     r.compile_seconds = compile_seconds
     stopped = r.interrupted or r.stopped
     film = r.film
