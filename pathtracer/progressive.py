@@ -147,6 +147,9 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
     t0 = time.perf_counter()
     backend.compile()
     compile_seconds = time.perf_counter() - t0
+    # the film only adds the ray counts up: a backend that can sum them itself (CUDA: on
+    # the GPU) returns the totals rather than H x W x 3 counts per pass
+    render_pass = getattr(backend, "render_pass_totals", backend.render_pass)
     result = RenderResult(film, 0.0, compile_seconds)
     n = 2 if adaptive else max(1, int(first_pass))
     active = None
@@ -175,15 +178,14 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
                 n = 2 * half
                 first = film.spp
                 for k in range(2):
-                    pass_sum, stats = backend.render_pass(first + k * half, half, seed,
-                                                          max_bounces, rr_depth, active)
+                    pass_sum, stats = render_pass(first + k * half, half, seed, max_bounces,
+                                                  rr_depth, active)
                     film.add(pass_sum, stats, half, active, half_b=k == 1)
             elif active is not None:
-                pass_sum, stats = backend.render_pass(film.spp, n, seed, max_bounces, rr_depth,
-                                                      active)
+                pass_sum, stats = render_pass(film.spp, n, seed, max_bounces, rr_depth, active)
                 film.add(pass_sum, stats, n, active)
             else:
-                pass_sum, stats = backend.render_pass(film.spp, n, seed, max_bounces, rr_depth)
+                pass_sum, stats = render_pass(film.spp, n, seed, max_bounces, rr_depth)
                 film.add(pass_sum, stats, n)
             dt = time.perf_counter() - t_pass
             elapsed = time.perf_counter() - start

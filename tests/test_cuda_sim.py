@@ -26,6 +26,9 @@ b, sb = [x.copy() for x in CPUBackend(s).render_pass(0, 2, 1, 7, 5)]
 out["cornell_maxdiff"] = float(np.abs(a - b).max())
 out["cornell_sum"] = [float(a.sum()), float(b.sum())]
 out["stats_equal"] = bool((sa == sb).all())
+c, tc = [x.copy() for x in CUDABackend(s).render_pass_totals(0, 2, 1, 7, 5)]
+out["totals_equal"] = bool((c == a).all() and tc.shape == (1, 1, 3) and
+                           (tc.reshape(3) == sb.reshape(-1, 3).sum(axis=0)).all())
 # Furnace on the simulator: L = Le * sum_{k<=3} a^k.
 f = load_scene(write_scene(tempfile.mkdtemp(), furnace_scene(0.5, 0.5, 3, res=(4, 4))))
 img, st = CUDABackend(f).render_pass(0, 24, 0, 3, 5)
@@ -47,6 +50,7 @@ def test_cuda_kernel_on_simulator():
     # The simulator runs the same float32 code as the CPU backend.
     assert out["cornell_maxdiff"] < 1e-4, out
     assert out["stats_equal"]
+    assert out["totals_equal"]      # render_pass_totals: the same sums, the counts summed
     expected = 0.5 * (1 + 0.5 + 0.25 + 0.125)
     assert abs(out["furnace_mean"] - expected) < 5 * out["furnace_se"] + 1e-6, out
     assert out["nonfinite"] == 0

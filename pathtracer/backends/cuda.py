@@ -237,22 +237,37 @@ class CUDABackend:
         self.d_stats.copy_to_host(self.stats)
         return self.out, self.stats
 
-    def render_rows(self, sample_start, n_samples, seed, max_bounces, rr_depth, row0, row1,
-                    active=None):
-        """A work item of a split render (pathtracer.distribute): the sums of rows
-        [row0, row1) (float32, a new array) and the ray counts of the pass (int64, 3), summed
-        on the GPU so that only the rows come back."""
-        self.launch(sample_start, n_samples, seed, max_bounces, rr_depth, active)
+    def _totals_of_pass(self):
+        """The pass's ray counts summed on the GPU (int64, 3): a few bytes copied instead
+        of H x W x 3 counts and three strided sums on the host."""
         if self._totals is None:
             self._totals = cuda.device_array(3, np.int64)
             self._totals_host = cuda.pinned_array(3, np.int64)
         self._totals.copy_to_device(np.zeros(3, np.int64))
         # (128 blocks at least: fewer make Numba warn of low occupancy)
         sum_stats[max(128, (self.scene.height + 31) // 32), 32](self.d_stats, self._totals)
+        self._totals.copy_to_host(self._totals_host)
+        return self._totals_host
+
+    def render_pass_totals(self, sample_start, n_samples, seed, max_bounces, rr_depth,
+                           active=None):
+        """render_pass with the ray counts summed on the GPU: (sums, counts 1 x 1 x 3).
+        What the progressive loop calls (the film only adds the counts up); render_pass
+        keeps the per-pixel counts (the parity tests compare them with the CPU's)."""
+        self.launch(sample_start, n_samples, seed, max_bounces, rr_depth, active)
+        self.d_out.copy_to_host(self.out)
+        return self.out, self._totals_of_pass().reshape(1, 1, 3)
+
+    def render_rows(self, sample_start, n_samples, seed, max_bounces, rr_depth, row0, row1,
+                    active=None):
+        """A work item of a split render (pathtracer.distribute): the sums of rows
+        [row0, row1) (float32, a new array) and the ray counts of the pass (int64, 3), summed
+        on the GPU so that only the rows come back."""
+        self.launch(sample_start, n_samples, seed, max_bounces, rr_depth, active)
+        totals = self._totals_of_pass().copy()
         rows = self.out[row0:row1]                   # pinned: the fastest copy
         self.d_out[row0:row1].copy_to_host(rows)
-        self._totals.copy_to_host(self._totals_host)
-        return np.array(rows), self._totals_host.copy()
+        return np.array(rows), totals
 
     def aovs(self, n_samples, seed):
         """The denoiser's albedo and normal images (float32 H x W x AOV_WIDTH, see aov_pixel)."""
