@@ -84,19 +84,6 @@ def error_estimate(film):
     return out
 
 
-def _error_estimate_reference(film):
-    """The estimate as first written (the tests compare error_estimate with it)."""
-    count_b = np.maximum(film.count_b, 1)[..., None]
-    count_a = np.maximum(film.count - film.count_b, 1)[..., None]
-    b = film.sum_b / count_b
-    a = (film.sum - film.sum_b) / count_a
-    mean = film.sum / np.maximum(film.count, 1)[..., None]
-    q = ((a - b) ** 2 / 4 / (mean * mean + RELMSE_EPS)).mean(axis=2)
-    padded = np.pad(q, 1, mode="edge")
-    h, w = q.shape
-    return sum(padded[dy:dy + h, dx:dx + w] for dy in range(3) for dx in range(3)) / 9
-
-
 def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=None,
            rr_depth=None, pass_seconds=0.5, on_pass=None, adaptive=None, first_pass=1,
            film=None, footprint_spp=None, headless=False):
