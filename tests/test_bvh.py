@@ -223,9 +223,15 @@ def test_fast_builder_makes_the_plain_builders_tree(rng, split):
     bunny = os.path.join(SHARED, "assets", "models", "stanford_bunny.obj")
     if os.path.exists(bunny):
         meshes.append(load_obj(bunny).positions)
+    # one ground-plane-like sliver beside a cloud: the root's split is unbalanced
+    sliver = rng.random((PARALLEL_MIN + 3000, 3, 3)).astype(np.float32)
+    sliver[:2000] *= np.float32([100.0, 0.001, 100.0])
+    meshes.append(sliver)
     for pos in meshes:
-        fast = build_bvh(pos, split=split)
         plain = build_bvh(pos, split=split, _plain=True)
-        assert fast.depth == plain.depth
-        for a, b in zip(fast[:3], plain[:3]):
-            assert np.array_equal(a, b)
+        # the thread count sets how much of the top is built before the parallel subtrees
+        for threads in ((None, 1, 7, 64) if len(pos) >= PARALLEL_MIN else (None,)):
+            fast = build_bvh(pos, split=split, _threads=threads)
+            assert fast.depth == plain.depth
+            for a, b in zip(fast[:3], plain[:3]):
+                assert np.array_equal(a, b)

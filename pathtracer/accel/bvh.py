@@ -10,6 +10,7 @@ Triangles are reordered so every leaf is a contiguous range.
 from typing import NamedTuple
 
 import numpy as np
+import numba
 from numba import njit, prange
 
 from .._cache import jit_cache
@@ -22,10 +23,11 @@ from ..kernels.layout import (BOX_CHILD0, BOX_CHILD1, BOX_MAX, BOX_MIN, BOX_STRI
 C_TRAVERSAL = 1.0
 C_INTERSECT = 1.0
 MAX_DEPTH = STACK_SIZE - 4  # deeper subtrees become leaves: the traversal stack never overflows
-# Parallel build: above PARALLEL_MIN triangles, subtrees of at least 1/SUBTREE_FRACTION of
-# them are left by the first pass and built in parallel.
+# Parallel build: above PARALLEL_MIN triangles, the first pass builds the top of the tree
+# and leaves subtrees of at most 2/threads of the triangles (and at least DEFER_MIN), which
+# are then built in parallel: two threads build the root's two subtrees.
 PARALLEL_MIN = 1 << 16
-SUBTREE_FRACTION = 16
+DEFER_MIN = 1 << 10
 DEFERRED = -7                # a child count marking a subtree built by another run
 
 
@@ -45,13 +47,20 @@ def _area(lo, hi):
 
 
 @njit(cache=jit_cache())
-def _run(t_lo, t_hi, cen, order, tasks, task_box, n_tasks, box, child, n_bins, max_leaf,
+def _centre(t_lo, t_hi, k, a):
+    """Triangle k's box centre on axis a, in float64: exact (half the sum of two float32
+    values), so it is computed where needed instead of stored and moved with the triangles."""
+    return 0.5 * (np.float64(t_lo[k, a]) + np.float64(t_hi[k, a]))
+
+
+@njit(cache=jit_cache())
+def _run(t_lo, t_hi, order, tasks, task_box, n_tasks, box, child, n_bins, max_leaf,
          min_leaf_split, midpoint, defer, deferred, deferred_box):
     """The build loop over the task stack ``tasks`` (rows: start, end, parent node, side,
     depth, bounds known; ``task_box``: lo, hi, centroid lo, centroid hi) into the node
     arrays ``box``/``child`` (node 0 is the root of whatever ``tasks`` holds). A task of
-    at least ``defer`` triangles (0: never) that would become an inner node below the root
-    is not built but appended to ``deferred`` (same row layout; its bounds in
+    DEFER_MIN to ``defer`` triangles (0: never) that would become an inner node below the
+    root is not built but appended to ``deferred`` (same row layout; its bounds in
     ``deferred_box``), its node box already written in its parent: another run builds it.
     Returns (nodes, depth, deferred count)."""
     bin_lo = np.empty((3, n_bins, 3))
@@ -78,7 +87,7 @@ def _run(t_lo, t_hi, cen, order, tasks, task_box, n_tasks, box, child, n_bins, m
         depth = tasks[n_tasks, 4]
         max_depth = max(max_depth, depth)
         count = end - start
-        if defer > 0 and parent >= 0 and count >= defer and count > max_leaf and \
+        if defer > 0 and parent >= 0 and DEFER_MIN <= count <= defer and count > max_leaf and \
                 count >= min_leaf_split and depth < MAX_DEPTH:
             # another run builds this subtree; its box goes into the parent now
             if not tasks[n_tasks, 5]:
@@ -91,8 +100,9 @@ def _run(t_lo, t_hi, cen, order, tasks, task_box, n_tasks, box, child, n_bins, m
                     for a in range(3):
                         lo[a] = min(lo[a], t_lo[k, a])
                         hi[a] = max(hi[a], t_hi[k, a])
-                        clo[a] = min(clo[a], cen[k, a])
-                        chi[a] = max(chi[a], cen[k, a])
+                        m = _centre(t_lo, t_hi, k, a)
+                        clo[a] = min(clo[a], m)
+                        chi[a] = max(chi[a], m)
                 for a in range(3):
                     task_box[n_tasks, a] = lo[a]
                     task_box[n_tasks, 3 + a] = hi[a]
@@ -128,8 +138,9 @@ def _run(t_lo, t_hi, cen, order, tasks, task_box, n_tasks, box, child, n_bins, m
                 for a in range(3):
                     lo[a] = min(lo[a], t_lo[k, a])
                     hi[a] = max(hi[a], t_hi[k, a])
-                    clo[a] = min(clo[a], cen[k, a])
-                    chi[a] = max(chi[a], cen[k, a])
+                    m = _centre(t_lo, t_hi, k, a)
+                    clo[a] = min(clo[a], m)
+                    chi[a] = max(chi[a], m)
         # Find the best binned split.
         best_cost = np.inf
         best_axis = -1
@@ -138,12 +149,11 @@ def _run(t_lo, t_hi, cen, order, tasks, task_box, n_tasks, box, child, n_bins, m
         binned = False
         if count >= min_leaf_split and depth < MAX_DEPTH:
             binned = True
+            # Only the counts are cleared: a bin's bounds are set by its first triangle and
+            # read only where its count is not zero (fewer stores on the many small nodes).
             for a in range(3):
                 for b in range(n_bins):
                     bin_n[a, b] = 0
-                    for c in range(3):
-                        bin_lo[a, b, c] = np.inf
-                        bin_hi[a, b, c] = -np.inf
             inv0 = n_bins / (chi[0] - clo[0]) if chi[0] - clo[0] > 0.0 else 0.0
             inv1 = n_bins / (chi[1] - clo[1]) if chi[1] - clo[1] > 0.0 else 0.0
             inv2 = n_bins / (chi[2] - clo[2]) if chi[2] - clo[2] > 0.0 else 0.0
@@ -157,14 +167,23 @@ def _run(t_lo, t_hi, cen, order, tasks, task_box, n_tasks, box, child, n_bins, m
                 for a in range(3):
                     inv = inv0 if a == 0 else (inv1 if a == 1 else inv2)
                     if inv > 0.0:
-                        b = min(int((cen[k, a] - clo[a]) * inv), n_bins - 1)
+                        m = 0.5 * (np.float64(t_lo[k, a]) + np.float64(t_hi[k, a]))
+                        b = min(int((m - clo[a]) * inv), n_bins - 1)
+                        if bin_n[a, b] == 0:
+                            bin_lo[a, b, 0] = x0
+                            bin_lo[a, b, 1] = x1
+                            bin_lo[a, b, 2] = x2
+                            bin_hi[a, b, 0] = y0
+                            bin_hi[a, b, 1] = y1
+                            bin_hi[a, b, 2] = y2
+                        else:
+                            bin_lo[a, b, 0] = min(bin_lo[a, b, 0], x0)
+                            bin_lo[a, b, 1] = min(bin_lo[a, b, 1], x1)
+                            bin_lo[a, b, 2] = min(bin_lo[a, b, 2], x2)
+                            bin_hi[a, b, 0] = max(bin_hi[a, b, 0], y0)
+                            bin_hi[a, b, 1] = max(bin_hi[a, b, 1], y1)
+                            bin_hi[a, b, 2] = max(bin_hi[a, b, 2], y2)
                         bin_n[a, b] += 1
-                        bin_lo[a, b, 0] = min(bin_lo[a, b, 0], x0)
-                        bin_lo[a, b, 1] = min(bin_lo[a, b, 1], x1)
-                        bin_lo[a, b, 2] = min(bin_lo[a, b, 2], x2)
-                        bin_hi[a, b, 0] = max(bin_hi[a, b, 0], y0)
-                        bin_hi[a, b, 1] = max(bin_hi[a, b, 1], y1)
-                        bin_hi[a, b, 2] = max(bin_hi[a, b, 2], y2)
             for a in range(3):
                 if chi[a] - clo[a] <= 0.0:
                     continue
@@ -173,26 +192,32 @@ def _run(t_lo, t_hi, cen, order, tasks, task_box, n_tasks, box, child, n_bins, m
                     acc_lo[c] = np.inf
                     acc_hi[c] = -np.inf
                 acc_n = 0
+                right_a = 0.0
                 for b in range(n_bins - 1, 0, -1):
-                    acc_n += bin_n[a, b]
-                    for c in range(3):
-                        acc_lo[c] = min(acc_lo[c], bin_lo[a, b, c])
-                        acc_hi[c] = max(acc_hi[c], bin_hi[a, b, c])
+                    if bin_n[a, b] > 0:
+                        acc_n += bin_n[a, b]
+                        for c in range(3):
+                            acc_lo[c] = min(acc_lo[c], bin_lo[a, b, c])
+                            acc_hi[c] = max(acc_hi[c], bin_hi[a, b, c])
+                        right_a = _area(acc_lo, acc_hi)
                     right_n[b] = acc_n
-                    right_area[b] = _area(acc_lo, acc_hi) if acc_n > 0 else 0.0
+                    right_area[b] = right_a
                 # Prefix sweep; boundary b splits bins < b from bins >= b.
                 for c in range(3):
                     acc_lo[c] = np.inf
                     acc_hi[c] = -np.inf
                 acc_n = 0
+                left_a = 0.0
                 for b in range(1, n_bins):
-                    acc_n += bin_n[a, b - 1]
-                    for c in range(3):
-                        acc_lo[c] = min(acc_lo[c], bin_lo[a, b - 1, c])
-                        acc_hi[c] = max(acc_hi[c], bin_hi[a, b - 1, c])
+                    if bin_n[a, b - 1] > 0:
+                        acc_n += bin_n[a, b - 1]
+                        for c in range(3):
+                            acc_lo[c] = min(acc_lo[c], bin_lo[a, b - 1, c])
+                            acc_hi[c] = max(acc_hi[c], bin_hi[a, b - 1, c])
+                        left_a = _area(acc_lo, acc_hi)
                     if acc_n == 0 or right_n[b] == 0:
                         continue
-                    cost = acc_n * _area(acc_lo, acc_hi) + right_n[b] * right_area[b]
+                    cost = acc_n * left_a + right_n[b] * right_area[b]
                     if cost < best_cost:
                         best_cost = cost
                         best_axis = a
@@ -236,11 +261,12 @@ def _run(t_lo, t_hi, cen, order, tasks, task_box, n_tasks, box, child, n_bins, m
                 i = start
                 j = end - 1
                 while i <= j:
-                    b = min(int((cen[i, a] - clo[a]) * scale), n_bins - 1)
+                    b = min(int((_centre(t_lo, t_hi, i, a) - clo[a]) * scale), n_bins - 1)
                     q = 0 if b < best_bin else 1
                     for c in range(3):
-                        side_b[q, 6 + c] = min(side_b[q, 6 + c], cen[i, c])
-                        side_b[q, 9 + c] = max(side_b[q, 9 + c], cen[i, c])
+                        m = _centre(t_lo, t_hi, i, c)
+                        side_b[q, 6 + c] = min(side_b[q, 6 + c], m)
+                        side_b[q, 9 + c] = max(side_b[q, 9 + c], m)
                     if q == 0:
                         i += 1
                     else:
@@ -254,13 +280,12 @@ def _run(t_lo, t_hi, cen, order, tasks, task_box, n_tasks, box, child, n_bins, m
                             f = t_hi[i, c]
                             t_hi[i, c] = t_hi[j, c]
                             t_hi[j, c] = f
-                            g = cen[i, c]
-                            cen[i, c] = cen[j, c]
-                            cen[j, c] = g
                         j -= 1
                 mid = i
                 if binned:
                     for b in range(n_bins):
+                        if bin_n[a, b] == 0:
+                            continue
                         q = 0 if b < best_bin else 1
                         for c in range(3):
                             side_b[q, c] = min(side_b[q, c], bin_lo[a, b, c])
@@ -315,24 +340,25 @@ def _run(t_lo, t_hi, cen, order, tasks, task_box, n_tasks, box, child, n_bins, m
 
 
 @njit(cache=jit_cache())
-def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split, midpoint):
-    """The tree, the triangle order, node count and depth. The per-triangle bounds and
-    centroids are copied and reordered along with ``order`` (the partitions swap them), so
-    every pass reads them in sequence; a node's bounds come with its task (from the
-    parent's bins and partition), so each range is read twice (bin, partition), not three
-    times. The top of the tree is built first; its subtrees of at least 1/16 of the
-    triangles are then built in parallel (_subtrees) and the nodes numbered as one
-    sequential build numbers them (_assemble): the tree is exactly that of the plain
-    formulation, _build_plain (tested)."""
+def _build(tri_lo, tri_hi, n_bins, max_leaf, min_leaf_split, midpoint, threads):
+    """The tree, the triangle order, node count and depth. The per-triangle bounds
+    (scratch arrays, changed) are reordered along with ``order`` (the partitions swap
+    them; centres are computed from them where needed), so every pass reads them in
+    sequence; a node's bounds come with its task (from the parent's bins and partition),
+    so each range is read twice (bin, partition), not three times. The top of the tree is
+    built first, down to subtrees of at most 2/threads of the triangles, which are then
+    built in parallel (_subtrees) and the nodes numbered as one sequential build numbers
+    them (_assemble): the tree is exactly that of the plain formulation, _build_plain
+    (tested), for any thread count."""
     n = tri_lo.shape[0]
     order = np.arange(n).astype(np.int32)
     if n == 0:
         box = np.zeros((1, BOX_WIDTH), np.float32)
         child = np.full((1, CHILD_WIDTH), CHILD_EMPTY, np.int32)
         return box, child, order, 1, 0
-    t_lo = tri_lo.copy()
-    t_hi = tri_hi.copy()
-    cen = centroid.copy()
+    # reordered in place: the caller's arrays are scratch (build_bvh makes them)
+    t_lo = tri_lo
+    t_hi = tri_hi
     rows = 4 * STACK_SIZE + 8
     tasks = np.zeros((rows, 6), np.int64)
     task_box = np.zeros((rows, 12))
@@ -340,10 +366,13 @@ def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split, midpoint)
     tasks[0, 2] = -1
     box = np.zeros((max(1, n), BOX_WIDTH), np.float32)
     child = np.full((max(1, n), CHILD_WIDTH), CHILD_EMPTY, np.int32)
-    defer = n // SUBTREE_FRACTION if n >= PARALLEL_MIN else 0
-    deferred = np.zeros((4 * SUBTREE_FRACTION + 8, 6), np.int64)
-    deferred_box = np.zeros((4 * SUBTREE_FRACTION + 8, 12))
-    n_top, depth, n_def = _run(t_lo, t_hi, cen, order, tasks, task_box, 1, box, child,
+    defer = (2 * n) // max(threads, 1) if n >= PARALLEL_MIN else 0
+    # Deferred tasks are children of top nodes of more than `defer` triangles, at most
+    # threads / 2 of them per depth: at most threads * (MAX_DEPTH + 1) deferred.
+    rows_def = max(threads, 1) * (MAX_DEPTH + 1) + 8
+    deferred = np.zeros((rows_def, 6), np.int64)
+    deferred_box = np.zeros((rows_def, 12))
+    n_top, depth, n_def = _run(t_lo, t_hi, order, tasks, task_box, 1, box, child,
                                n_bins, max_leaf, min_leaf_split, midpoint, defer, deferred,
                                deferred_box)
     if n_def == 0:
@@ -355,7 +384,7 @@ def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split, midpoint)
     sub_child = np.full((offsets[n_def], CHILD_WIDTH), CHILD_EMPTY, np.int32)
     sub_nodes = np.zeros(n_def, np.int64)
     sub_depth = np.zeros(n_def, np.int64)
-    _subtrees(t_lo, t_hi, cen, order, deferred, deferred_box, n_def, offsets, sub_box,
+    _subtrees(t_lo, t_hi, order, deferred, deferred_box, n_def, offsets, sub_box,
               sub_child, sub_nodes, sub_depth, n_bins, max_leaf, min_leaf_split, midpoint)
     for k in range(n_def):
         depth = max(depth, sub_depth[k])
@@ -365,7 +394,7 @@ def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split, midpoint)
 
 
 @njit(parallel=True, cache=jit_cache())
-def _subtrees(t_lo, t_hi, cen, order, deferred, deferred_box, n_def, offsets, sub_box,
+def _subtrees(t_lo, t_hi, order, deferred, deferred_box, n_def, offsets, sub_box,
               sub_child, sub_nodes, sub_depth, n_bins, max_leaf, min_leaf_split, midpoint):
     """Build each deferred subtree (disjoint triangle ranges) in parallel, subtree k into
     rows offsets[k]... of sub_box/sub_child with its own node numbering (its root: 0)."""
@@ -382,7 +411,7 @@ def _subtrees(t_lo, t_hi, cen, order, deferred, deferred_box, n_def, offsets, su
         hi = offsets[k + 1]
         none = np.zeros((1, 6), np.int64)
         none_box = np.zeros((1, 12))
-        nodes, depth, _ = _run(t_lo, t_hi, cen, order, tasks, task_box, 1, sub_box[lo:hi],
+        nodes, depth, _ = _run(t_lo, t_hi, order, tasks, task_box, 1, sub_box[lo:hi],
                                sub_child[lo:hi], n_bins, max_leaf, min_leaf_split,
                                midpoint, 0, none, none_box)
         sub_nodes[k] = nodes
@@ -641,7 +670,7 @@ def _build_plain(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split, mid
     return box[:n_nodes].copy(), child[:n_nodes].copy(), order, n_nodes, max_depth
 
 
-def build_bvh(tri_verts, n_bins=16, max_leaf=8, split="sah", _plain=False):
+def build_bvh(tri_verts, n_bins=16, max_leaf=8, split="sah", _plain=False, _threads=None):
     """Build a BVH over triangles ``tri_verts`` (float32, N x 3 x 3).
 
     ``split``: "sah" (binned SAH, the renderer's), or, for the benchmark's comparisons,
@@ -651,28 +680,56 @@ def build_bvh(tri_verts, n_bins=16, max_leaf=8, split="sah", _plain=False):
     if split not in ("sah", "midpoint", "none"):
         raise ValueError(f"unknown split {split!r}")
     tri_verts = np.ascontiguousarray(tri_verts, dtype=np.float32)
-    tri_lo = tri_verts.min(axis=1)
-    tri_hi = tri_verts.max(axis=1)
-    centroid = 0.5 * (tri_lo.astype(np.float64) + tri_hi.astype(np.float64))
+    if tri_verts.ndim != 3 or tri_verts.shape[1:] != (3, 3):
+        raise ValueError(f"triangles must be N x 3 x 3, not {tri_verts.shape}")
+    tri_lo, tri_hi = _triangle_bounds(tri_verts)
     min_leaf_split = len(tri_verts) + 1 if split == "none" else 2
-    build = _build_plain if _plain else _build
-    box, child, order, _, depth = build(tri_lo, tri_hi, centroid, int(n_bins), int(max_leaf),
-                                        min_leaf_split, split == "midpoint")
-    return BVH(_widen(box), child, order, int(depth))
+    if _plain:
+        centroid = 0.5 * (tri_lo.astype(np.float64) + tri_hi.astype(np.float64))
+        box, child, order, _, depth = _build_plain(tri_lo, tri_hi, centroid, int(n_bins),
+                                                   int(max_leaf), min_leaf_split,
+                                                   split == "midpoint")
+    else:
+        threads = numba.get_num_threads() if _threads is None else int(_threads)
+        box, child, order, _, depth = _build(tri_lo, tri_hi, int(n_bins), int(max_leaf),
+                                             min_leaf_split, split == "midpoint", threads)
+    _widen(box)
+    return BVH(box, child, order, int(depth))
 
 
+@njit(parallel=True, cache=jit_cache())
+def _triangle_bounds(tri_verts):
+    """Per-triangle bounds (float32), in parallel; vertices are finite (the scene loader
+    checks)."""
+    n = tri_verts.shape[0]
+    lo = np.empty((n, 3), np.float32)
+    hi = np.empty((n, 3), np.float32)
+    for k in prange(n):
+        for a in range(3):
+            x0 = tri_verts[k, 0, a]
+            x1 = tri_verts[k, 1, a]
+            x2 = tri_verts[k, 2, a]
+            low = min(x0, min(x1, x2))
+            high = max(x0, max(x1, x2))
+            lo[k, a] = low
+            hi[k, a] = high
+    return lo, hi
+
+
+@njit(parallel=True, cache=jit_cache())
 def _widen(box):
-    """Push every bound two float32 ulps outward. A ray with a zero direction component
-    whose origin lies exactly on a box face would otherwise get the slab (0 * BIG = 0) and
-    miss the box; with widened boxes no triangle vertex lies on a face."""
-    out = box.copy()
-    for side in (BOX_CHILD0, BOX_CHILD1):
-        lo = slice(side + BOX_MIN, side + BOX_MIN + 3)
-        hi = slice(side + BOX_MAX, side + BOX_MAX + 3)
-        for _ in range(2):
-            out[:, lo] = np.nextafter(out[:, lo], np.float32(-np.inf))
-            out[:, hi] = np.nextafter(out[:, hi], np.float32(np.inf))
-    return out
+    """Push every bound two float32 ulps outward, in place. A ray with a zero direction
+    component whose origin lies exactly on a box face would otherwise get the slab
+    (0 * BIG = 0) and miss the box; with widened boxes no triangle vertex lies on a face."""
+    down = np.float32(-np.inf)
+    up = np.float32(np.inf)
+    for k in prange(box.shape[0]):
+        for side in (BOX_CHILD0, BOX_CHILD1):
+            for c in range(3):
+                lo = box[k, side + BOX_MIN + c]
+                hi = box[k, side + BOX_MAX + c]
+                box[k, side + BOX_MIN + c] = np.nextafter(np.nextafter(lo, down), down)
+                box[k, side + BOX_MAX + c] = np.nextafter(np.nextafter(hi, up), up)
 
 
 def sah_cost(bvh):
