@@ -42,15 +42,14 @@ def test_python_and_cpu_agree_bit_for_bit():
 
 @njit(cache=True)
 def _compiled_bits(xs, seeds):
-    out = np.empty((len(xs), 6), np.uint64)
+    out = np.empty((len(xs), 7), np.uint64)
     for i in range(len(xs)):
         x = xs[i]
         out[i, 0] = bits.pcg_hash(x)
         out[i, 1] = bits.reverse_bits(x)
         out[i, 2] = bits.lk_permutation(x, seeds[i])
-        out[i, 3] = bits.lowest_bit(x | np.uint64(1) << np.uint64(31))
-        out[i, 4] = bits.clear_lowest_bit(x | np.uint64(1) << np.uint64(31))
-        out[i, 5] = bits.owen_scramble(x, seeds[i])
+        out[i, 3], out[i, 4], out[i, 5] = bits.sobol_digits(x)
+        out[i, 6] = bits.owen_scramble(x, seeds[i])
     return out
 
 
@@ -63,15 +62,15 @@ def test_32_bit_ir_equals_the_python_bodies(rng):
                      np.uint64)
     got = _compiled_bits(xs, seeds)
     for i, (x, seed) in enumerate(zip(xs, seeds)):
-        high = x | np.uint64(1) << np.uint64(31)
         want = [bits.pcg_hash(x), bits.reverse_bits(x), bits.lk_permutation(x, seed),
-                bits.lowest_bit(high), bits.clear_lowest_bit(high), bits.owen_scramble(x, seed)]
+                *bits.sobol_digits(x), bits.owen_scramble(x, seed)]
         assert [int(v) for v in got[i]] == [int(v) for v in want], (int(x), int(seed))
-    # known values: reverse_bits(2) = 2**30; 0 | 2**31: lowest bit 31, cleared 0;
-    # 1 | 2**31: lowest bit 0, cleared 2**31
+    # known values: reverse_bits(2) = 2**30; the Sobol digits (reversed bit order) of
+    # index 0: none; of index 1: 1/2 in each dimension; of index 2: 3/4
     assert int(got[2, 1]) == 2**30
-    assert [int(v) for v in got[0, 3:5]] == [31, 0]
-    assert [int(v) for v in got[1, 3:5]] == [0, 2**31]
+    assert [int(v) for v in got[0, 3:6]] == [0, 0, 0]
+    assert [int(v) for v in got[1, 3:6]] == [1, 1, 1]
+    assert [int(v) for v in got[2, 3:6]] == [3, 3, 3]
 
 
 def test_uniform_pairs_chi2():

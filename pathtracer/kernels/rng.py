@@ -180,32 +180,6 @@ def reverse_bits(x):
     return ((x >> _B16) | (x << _B16)) & M32
 
 
-def _cttz_ir(b, x):
-    i1 = ir.IntType(1)
-    cttz = b.module.declare_intrinsic("llvm.cttz", [_I32], ir.FunctionType(_I32, [_I32, i1]))
-    return b.call(cttz, [x, ir.Constant(i1, 1)])     # (1: x is never 0)
-
-
-@_ir32(_cttz_ir)
-def lowest_bit(x):
-    """The number of the lowest set bit of x (a uint64 in (0, 2**32))."""
-    return np.uint64((int(x) & -int(x)).bit_length() - 1)
-
-
-def _blsr_ir(b, x):
-    return b.and_(x, b.sub(x, _c(1)))
-
-
-@_ir32(_blsr_ir)
-def clear_lowest_bit(x):
-    """x (a uint64 in (0, 2**32)) without its lowest set bit."""
-    return x & (x - _K1)
-
-
-SOBOL_MATRIX_REVERSED = np.array([[int(f"{int(v):032b}"[::-1], 2) for v in row]
-                                  for row in SOBOL_MATRIX], np.uint64)
-
-
 def _lk_ir(b, x, seed):
     x = b.xor(x, b.mul(x, _c(_LK0)))
     x = b.add(x, seed)
@@ -226,6 +200,82 @@ def lk_permutation(x, seed):
     x ^= (x * _LK1) & M32
     x ^= (x * _LK2) & M32
     return x
+
+
+def _sobol_digits_py(u):
+    """Dimensions 1-3 of the Sobol point of index u (a uint64 below 2**32), each a 32-bit
+    fraction in reversed bit order (dimension 0 is u itself: van der Corput reversed). The
+    direction numbers are generated as the loop goes, from their recurrences (Joe & Kuo; see
+    sobol_matrices) in reversed bit order, where a right shift becomes a left shift:
+    dimension 1 v[k+1] = v[k] ^ v[k] << 1; dimension 2 v[k+2] = v[k] ^ v[k] << 2 ^ v[k+1]
+    from (1, 3); dimension 3 v[k+3] = v[k] ^ v[k] << 3 ^ v[k+1] from (1, 3, 4). No table:
+    on the GPU a table lookup indexed by a lane's own bit number serialises in the
+    constant cache."""
+    x1 = x2 = x3 = np.uint64(0)
+    a = np.uint64(1)
+    b0, b1 = np.uint64(1), np.uint64(3)
+    c0, c1, c2 = np.uint64(1), np.uint64(3), np.uint64(4)
+    while u != 0:
+        if u & _K1:
+            x1 ^= a
+            x2 ^= b0
+            x3 ^= c0
+        a = (a ^ (a << _B1)) & M32
+        b0, b1 = b1, (b0 ^ (b0 << _B2) ^ b1) & M32
+        c0, c1, c2 = c1, c2, (c0 ^ (c0 << np.uint64(3)) ^ c1) & M32
+        u >>= _K1
+    return x1, x2, x3
+
+
+@intrinsic
+def _sobol_digits_ir(typingctx, u):
+    """_sobol_digits_py in 32-bit LLVM IR: a loop over u's bits with branch-free XORs."""
+    if not isinstance(u, types.Integer):
+        return None
+    sig = types.UniTuple(types.uint64, 3)(u)
+
+    def codegen(context, builder, signature, values):
+        (v,) = values
+        u0 = builder.trunc(v, _I32) if v.type.width > 32 else (
+            builder.zext(v, _I32) if v.type.width < 32 else v)
+        entry = builder.block
+        loop = builder.append_basic_block("sobol.loop")
+        body = builder.append_basic_block("sobol.body")
+        done = builder.append_basic_block("sobol.done")
+        builder.branch(loop)
+        builder.position_at_end(loop)
+        names = ("u", "x1", "x2", "x3", "a", "b0", "b1", "c0", "c1", "c2")
+        start = (u0, _c(0), _c(0), _c(0), _c(1), _c(1), _c(3), _c(1), _c(3), _c(4))
+        phi = {n: builder.phi(_I32, name="sobol." + n) for n in names}
+        for n, s0 in zip(names, start):
+            phi[n].add_incoming(s0, entry)
+        builder.cbranch(builder.icmp_unsigned("!=", phi["u"], _c(0)), body, done)
+        builder.position_at_end(body)
+        mask = builder.sub(_c(0), builder.and_(phi["u"], _c(1)))
+        nxt = {"u": builder.lshr(phi["u"], _c(1)),
+               "x1": builder.xor(phi["x1"], builder.and_(phi["a"], mask)),
+               "x2": builder.xor(phi["x2"], builder.and_(phi["b0"], mask)),
+               "x3": builder.xor(phi["x3"], builder.and_(phi["c0"], mask)),
+               "a": builder.xor(phi["a"], builder.shl(phi["a"], _c(1))),
+               "b0": phi["b1"],
+               "b1": builder.xor(builder.xor(phi["b0"], builder.shl(phi["b0"], _c(2))),
+                                 phi["b1"]),
+               "c0": phi["c1"],
+               "c1": phi["c2"],
+               "c2": builder.xor(builder.xor(phi["c0"], builder.shl(phi["c0"], _c(3))),
+                                 phi["c1"])}
+        end = builder.block
+        for n in names:
+            phi[n].add_incoming(nxt[n], end)
+        builder.branch(loop)
+        builder.position_at_end(done)
+        out = [builder.zext(phi[n], _I64) for n in ("x1", "x2", "x3")]
+        return context.make_tuple(builder, signature.return_type, out)
+    return sig, codegen
+
+
+overload(_sobol_digits_py, strict=False)(lambda u: (lambda u: _sobol_digits_ir(u)))
+sobol_digits = _sobol_digits_py
 
 
 @device
@@ -249,22 +299,12 @@ def sobol_set(pix, index_reversed, dset):
     that the output scramble (sobol_component) absorbs: the estimator is the same in
     distribution as Burley's. All of it runs in reversed bit order (as Cycles does), which
     saves reversing the index and the coordinates back and forth; the shuffled index is
-    reversed back once, to visit only its set bits."""
+    reversed back once, to walk its bits from the lowest (sobol_digits)."""
     seed = pcg_hash((pix + (np.uint64(dset) + _K1) * _SET_MUL) & M32)
     t = lk_permutation(index_reversed, seed) ^ lk_permutation(np.uint64(0), seed)
-    u = reverse_bits(t)     # the shuffled index: one matrix column per set bit
-    x0 = np.uint64(0)
-    x1 = np.uint64(0)
-    x2 = np.uint64(0)
-    x3 = np.uint64(0)
-    while u != 0:
-        k = lowest_bit(u)
-        x0 ^= SOBOL_MATRIX_REVERSED[0, k]
-        x1 ^= SOBOL_MATRIX_REVERSED[1, k]
-        x2 ^= SOBOL_MATRIX_REVERSED[2, k]
-        x3 ^= SOBOL_MATRIX_REVERSED[3, k]
-        u = clear_lowest_bit(u)
-    return x0, x1, x2, x3, seed
+    u = reverse_bits(t)     # the shuffled index
+    x1, x2, x3 = sobol_digits(u)
+    return u, x1, x2, x3, seed
 
 
 @device
