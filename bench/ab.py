@@ -33,13 +33,24 @@ THROUGHPUT = {
     "cpu": {"cornell-box": ((256, 256), 4), "bunny-studio": ((256, 192), 4),
             "sun": ((256, 192), 4), "textured": ((256, 192), 4)},
     "cuda": {"cornell-box": ((1024, 1024), 64), "bunny-studio": ((1024, 768), 16),
-             "sun": ((1024, 768), 16), "textured": ((1024, 768), 16)},
+             "sun": ((1024, 768), 16), "textured": ((1024, 768), 16),
+             "bunny-mesh": ((1024, 1024), 16), "dragon-1.6m": ((1024, 1024), 16)},
 }
+DEFAULT_SCENES = ("cornell-box", "bunny-studio", "sun", "textured")
 
 
 def _describe(name, resolution):
-    """A SceneDescription: a study scene of bench.scenes, or a file of scenes/."""
-    from bench.scenes import CONVERGENCE, describe
+    """A SceneDescription: a study scene of bench.scenes, the scaling scene around the
+    Stanford bunny (69k triangles, "bunny-mesh") or the dragon subdivided to 1.6M
+    triangles ("dragon-1.6m", made by shared/tools/make_big_mesh.py), or a file of
+    scenes/."""
+    from bench.scenes import CONVERGENCE, describe, mesh_desc
+    if name in ("bunny-mesh", "dragon-1.6m"):
+        from bench.common import SHARED
+        from bench.scaling import big_mesh
+        obj = (os.path.join(SHARED, "assets", "models", "stanford_bunny.obj")
+               if name == "bunny-mesh" else big_mesh(2))
+        return mesh_desc(obj, resolution)
     if name in CONVERGENCE:
         source, _ = CONVERGENCE[name]
         if callable(source):
@@ -123,7 +134,7 @@ def _run_worker(tree, scene, backend, resolution, spp, mode, repeats=0, save=Non
 def throughput(args):
     from bench.common import command, machine, now, versions
     table = THROUGHPUT[args.backend]
-    scenes = args.scenes or list(table)
+    scenes = args.scenes or [s for s in DEFAULT_SCENES if s in table]
     record = {"command": command(), "machine": machine(), "date": now(),
               "versions": versions(), "backend": args.backend, "trees": args.trees,
               "results": []}

@@ -20,7 +20,11 @@ SIZES = {
     "cornell-box": [((1024, 1024), 64)],
     "bunny-studio": [((256, 192), 64), ((1024, 768), 16)],
     "sun": [((256, 192), 64), ((1024, 768), 16)],
+    # the scaling scene (bench.scenes.mesh_desc: diffuse mesh, constant sky, 3 bounces)
+    "bunny-mesh": [((1024, 1024), 16)],
+    "dragon-1.6m": [((1024, 1024), 16)],
 }
+DEFAULT_SCENES = ("cornell-box", "bunny-studio", "sun")
 
 # name -> CUDABackend options
 VARIANTS = {
@@ -92,7 +96,7 @@ def main(argv=None):
     from bench.common import command, machine, now, versions
     from pathtracer.scene import compile_scene
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--scenes", nargs="*", default=list(SIZES))
+    p.add_argument("--scenes", nargs="*", default=list(DEFAULT_SCENES), choices=list(SIZES))
     p.add_argument("--variants", default="pixel-exact,default")
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--mitsuba", action="store_true")

@@ -11,7 +11,7 @@ from numba import njit
 from pathtracer.accel import build_bvh, sah_cost
 from pathtracer.kernels.constants import INF, STACK_SIZE
 from pathtracer.kernels.intersect import ray_triangle
-from pathtracer.kernels.traverse import any_hit, closest_hit
+from pathtracer.kernels.traverse import _load_node, any_hit, closest_hit
 from pathtracer.scene.meshes import load_obj
 from tests.conftest import SHARED, needs_shared
 
@@ -235,3 +235,32 @@ def test_fast_builder_makes_the_plain_builders_tree(rng, split):
             assert fast.depth == plain.depth
             for a, b in zip(fast[:3], plain[:3]):
                 assert np.array_equal(a, b)
+
+
+@njit(cache=True)
+def _load_nodes(box, child):
+    out = np.empty((box.shape[0], 16))
+    for k in range(box.shape[0]):
+        v = _load_node(box, child, k)      # 12 float32 then 4 int32: indexed statically
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = v[0], v[1], v[2], v[3]
+        out[k, 4], out[k, 5], out[k, 6], out[k, 7] = v[4], v[5], v[6], v[7]
+        out[k, 8], out[k, 9], out[k, 10], out[k, 11] = v[8], v[9], v[10], v[11]
+        out[k, 12], out[k, 13], out[k, 14], out[k, 15] = v[12], v[13], v[14], v[15]
+    return out
+
+
+def test_node_loads_read_the_node_layout(rng):
+    """The traversal reads a node with four 128-bit loads (kernels.loads): compiled and
+    interpreted, they give each child's box and (index, count) as the layout names them."""
+    v = rng.random((3000, 3, 3)).astype(np.float32)
+    bvh = build_bvh(v)
+    want = np.concatenate(
+        [bvh.box[:, L.BOX_CHILD0 + L.BOX_MIN:L.BOX_CHILD0 + L.BOX_MIN + 3],
+         bvh.box[:, L.BOX_CHILD0 + L.BOX_MAX:L.BOX_CHILD0 + L.BOX_MAX + 3],
+         bvh.box[:, L.BOX_CHILD1 + L.BOX_MIN:L.BOX_CHILD1 + L.BOX_MIN + 3],
+         bvh.box[:, L.BOX_CHILD1 + L.BOX_MAX:L.BOX_CHILD1 + L.BOX_MAX + 3],
+         bvh.child[:, [L.CHILD0_INDEX, L.CHILD0_COUNT, L.CHILD1_INDEX, L.CHILD1_COUNT]]],
+        axis=1).astype(np.float64)
+    assert np.array_equal(_load_nodes(bvh.box, bvh.child), want)
+    for k in (0, len(bvh.box) // 2, len(bvh.box) - 1):
+        assert np.array_equal(np.array(_load_node(bvh.box, bvh.child, k), np.float64), want[k])

@@ -26,7 +26,7 @@ COLUMN_ARRAYS = {"tri_v", "tri_n", "tri_uv", "tri_t", "mat", "mat_tex", "point_l
                  "tex_int", "tex_f", "bvh_box", "bvh_child", "box", "child", "stats"}
 SLOT_ARRAYS = {"cam", "env_info", "params"}
 # device helpers that take a column as an argument: name -> position of that argument
-COLUMN_ARGUMENTS = {"load3": 2, "ray_box": 4, "interpolate3": 2}
+COLUMN_ARGUMENTS = {"load3": 2, "load4": 2, "interpolate3": 2}
 
 
 def _name(node):

@@ -56,6 +56,18 @@ MAX_REGISTERS = 64
 FAST_MATH_FLAGS = frozenset({"nsz", "arcp", "contract", "afn", "reassoc"})
 
 
+def _aligned(d_scene):
+    """The device scene, after checking what kernels.loads' 128-bit loads of BVH nodes
+    need: 16-byte aligned rows (cuda.to_device allocates at 256-byte boundaries; a
+    misaligned vector load would fault)."""
+    if not config.ENABLE_CUDASIM:
+        for name in ("bvh_box", "bvh_child"):
+            a = getattr(d_scene, name)
+            if a.device_ctypes_pointer.value % 16 or (a.strides[0] % 16):
+                raise RuntimeError(f"pt-render: {name} on the GPU is not 16-byte aligned")
+    return d_scene
+
+
 @functools.lru_cache(maxsize=None)
 def pass_kernel(features, max_registers=None, fast=False, regenerate=None):
     """The pass kernel for scenes with ``features`` (``regenerate``: force render_pixel's
@@ -173,7 +185,7 @@ class CUDABackend:
             target_threads = TARGET_THREADS_REGENERATING if regenerate else TARGET_THREADS
         self.target_threads = target_threads
         self.kernel = pass_kernel(scene.features, max_registers, bool(fast), bool(regenerate))
-        self.d_scene = SceneArrays(*[cuda.to_device(a) for a in scene.arrays])
+        self.d_scene = _aligned(SceneArrays(*[cuda.to_device(a) for a in scene.arrays]))
         h, w = scene.height, scene.width
         self.d_out = cuda.device_array((h, w, 3), np.float32)
         self.d_stats = cuda.device_array((h, w, 3), np.int32)
@@ -191,8 +203,9 @@ class CUDABackend:
         API's re-render; nothing is compiled). Only the arrays that changed are copied to
         the GPU (an unchanged BVH and mesh stay where they are)."""
         old = self.scene.arrays
-        self.d_scene = SceneArrays(*[d if _same(a, o) else cuda.to_device(a)
-                                     for a, o, d in zip(scene.arrays, old, self.d_scene)])
+        self.d_scene = _aligned(SceneArrays(*[d if _same(a, o) else cuda.to_device(a)
+                                              for a, o, d in zip(scene.arrays, old,
+                                                                 self.d_scene)]))
         self.scene = scene
 
     def compile(self):

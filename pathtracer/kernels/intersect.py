@@ -7,7 +7,7 @@ positively (``u >= 0 and ...``) so that a NaN from a degenerate triangle is a mi
 """
 from .constants import BIG, INF, ONE, SLAB_SCALE, ZERO
 from .device import device
-from .layout import BOX_MAX, BOX_MIN, TRI_E1, TRI_E2, TRI_V0
+from .layout import TRI_E1, TRI_E2, TRI_V0
 
 
 @device
@@ -60,19 +60,18 @@ def safe_inverse(d):
 
 
 @device
-def ray_box(o, inv_d, box, i, j, t_max):
-    """Entry distance of the ray into the box that starts at box[i, j] (see layout), or INF.
+def slab(o, inv_d, lox, loy, loz, hix, hiy, hiz, t_max):
+    """Entry distance of the ray into the box (lo, hi), or INF (the traversal loads a
+    node's boxes with vector loads, kernels.loads).
 
     Slab test; t_far is scaled up by SLAB_SCALE so rounding never culls a touched box.
     """
-    lo = j + BOX_MIN
-    hi = j + BOX_MAX
-    tx0 = (box[i, lo] - o[0]) * inv_d[0]
-    tx1 = (box[i, hi] - o[0]) * inv_d[0]
-    ty0 = (box[i, lo + 1] - o[1]) * inv_d[1]
-    ty1 = (box[i, hi + 1] - o[1]) * inv_d[1]
-    tz0 = (box[i, lo + 2] - o[2]) * inv_d[2]
-    tz1 = (box[i, hi + 2] - o[2]) * inv_d[2]
+    tx0 = (lox - o[0]) * inv_d[0]
+    tx1 = (hix - o[0]) * inv_d[0]
+    ty0 = (loy - o[1]) * inv_d[1]
+    ty1 = (hiy - o[1]) * inv_d[1]
+    tz0 = (loz - o[2]) * inv_d[2]
+    tz1 = (hiz - o[2]) * inv_d[2]
     t_near = max(max(min(tx0, tx1), min(ty0, ty1)), max(min(tz0, tz1), ZERO))
     t_far = min(min(max(tx0, tx1), max(ty0, ty1)), min(max(tz0, tz1), t_max)) * SLAB_SCALE
     if t_near <= t_far:

@@ -7,9 +7,25 @@ with n < 0 empty. Node 0 is the root.
 """
 from .constants import INF, SLAB_SCALE, ZERO
 from .device import device
-from .intersect import ray_box, ray_triangle, safe_inverse
-from .layout import (BOX_CHILD0, BOX_CHILD1, BOX_STRIDE, CHILD0_COUNT, CHILD0_INDEX,
-                     CHILD1_COUNT, CHILD1_INDEX, CHILD_COUNT, CHILD_INDEX, CHILD_STRIDE)
+from .intersect import ray_triangle, safe_inverse, slab
+from .layout import (BOX_CHILD0, BOX_CHILD1, BOX_MAX, BOX_MIN, BOX_WIDTH, CHILD0_COUNT,
+                     CHILD0_INDEX, CHILD1_COUNT, CHILD1_INDEX, CHILD_WIDTH)
+from .loads import load4
+
+# _load_node reads the node layout as four 128-bit rows
+assert (BOX_CHILD0, BOX_CHILD1, BOX_MIN, BOX_MAX, BOX_WIDTH) == (0, 6, 0, 3, 12)
+assert (CHILD0_INDEX, CHILD0_COUNT, CHILD1_INDEX, CHILD1_COUNT, CHILD_WIDTH) == (0, 1, 2, 3, 4)
+
+
+@device
+def _load_node(bvh_box, bvh_child, node):
+    """Node ``node``'s two child boxes and (index, count) pairs in four 128-bit loads (the
+    layout of kernels.layout: lo0 hi0 lo1 hi1, then c0 n0 c1 n1; tested against it)."""
+    lx0, ly0, lz0, hx0 = load4(bvh_box, node, BOX_CHILD0 + BOX_MIN)
+    hy0, hz0, lx1, ly1 = load4(bvh_box, node, BOX_CHILD0 + BOX_MAX + 1)
+    lz1, hx1, hy1, hz1 = load4(bvh_box, node, BOX_CHILD1 + BOX_MIN + 2)
+    c0, n0, c1, n1 = load4(bvh_child, node, CHILD0_INDEX)
+    return lx0, ly0, lz0, hx0, hy0, hz0, lx1, ly1, lz1, hx1, hy1, hz1, c0, n0, c1, n1
 
 
 @device
@@ -39,12 +55,10 @@ def closest_hit(o, d, t_max, skip, tri_v, bvh_box, bvh_child, stack):
     while sp > 0:
         sp -= 1
         node = stack[sp]
-        c0 = bvh_child[node, CHILD0_INDEX]
-        n0 = bvh_child[node, CHILD0_COUNT]
-        c1 = bvh_child[node, CHILD1_INDEX]
-        n1 = bvh_child[node, CHILD1_COUNT]
-        t0 = ray_box(o, inv_d, bvh_box, node, BOX_CHILD0, t_best) if n0 >= 0 else INF
-        t1 = ray_box(o, inv_d, bvh_box, node, BOX_CHILD1, t_best) if n1 >= 0 else INF
+        (lx0, ly0, lz0, hx0, hy0, hz0, lx1, ly1, lz1, hx1, hy1, hz1,
+         c0, n0, c1, n1) = _load_node(bvh_box, bvh_child, node)
+        t0 = slab(o, inv_d, lx0, ly0, lz0, hx0, hy0, hz0, t_best) if n0 >= 0 else INF
+        t1 = slab(o, inv_d, lx1, ly1, lz1, hx1, hy1, hz1, t_best) if n1 >= 0 else INF
         # Nearer child first: swap so that child 0 is the nearer one.
         if t1 < t0:
             c0, c1 = c1, c0
@@ -80,11 +94,16 @@ def any_hit(o, d, t_max, skip_a, skip_b, tri_v, bvh_box, bvh_child, stack):
     while sp > 0:
         sp -= 1
         node = stack[sp]
+        (lx0, ly0, lz0, hx0, hy0, hz0, lx1, ly1, lz1, hx1, hy1, hz1,
+         c0, n0, c1, n1) = _load_node(bvh_box, bvh_child, node)
         for side in range(2):
-            c = bvh_child[node, CHILD_STRIDE * side + CHILD_INDEX]
-            n = bvh_child[node, CHILD_STRIDE * side + CHILD_COUNT]
-            if n >= 0 and ray_box(o, inv_d, bvh_box, node, BOX_CHILD0 + BOX_STRIDE * side,
-                                  t_max) < INF:
+            c = c0 if side == 0 else c1
+            n = n0 if side == 0 else n1
+            if side == 0:
+                t = slab(o, inv_d, lx0, ly0, lz0, hx0, hy0, hz0, t_max) if n >= 0 else INF
+            else:
+                t = slab(o, inv_d, lx1, ly1, lz1, hx1, hy1, hz1, t_max) if n >= 0 else INF
+            if t < INF:
                 if n == 0:
                     stack[sp] = c
                     sp += 1
