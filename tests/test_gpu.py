@@ -106,6 +106,24 @@ def test_no_float64_in_full_feature_ptx(tmp_path):
 
 
 @gpu
+def test_principled_eval_is_called_not_inlined(tmp_path):
+    """backends.cuda.NOINLINE: the principled BSDF's evaluation stays one called function
+    in the PTX of a scene with principled materials (the instruction-cache saving)."""
+    from pathtracer.backends import make_backend
+    from pathtracer.backends.cuda import NOINLINE
+    backend = make_backend("cuda", _full_feature_scene(tmp_path))
+    backend.compile()
+    import re
+    ptx = backend.ptx()
+    for name in NOINLINE:
+        mark = re.escape(f"{len(name)}{name}")
+        # (PTX puts a declaration's or a call's parts on several lines)
+        funcs = re.findall(r"\.func\b[^{;]*?" + mark, ptx)
+        calls = re.findall(r"\bcall(?:\.uni)?\b[^;]*?" + mark, ptx)
+        assert funcs and calls, (name, len(funcs), len(calls))
+
+
+@gpu
 def test_full_feature_parity(tmp_path):
     """CPU and CUDA run the same code on a scene with every feature: same random numbers,
     images equal to float tolerance."""

@@ -56,6 +56,57 @@ MAX_REGISTERS = 64
 FAST_MATH_FLAGS = frozenset({"nsz", "arcp", "contract", "afn", "reassoc"})
 
 
+# Device functions called, not inlined, in the pass kernel. NVVM inlines every device
+# function; the principled BSDF's evaluation, reached from next-event estimation and from
+# BSDF sampling's folded lobes, then appears several times in a kernel whose warps already
+# stall on instruction fetch 64-73 % of the time (Nsight Compute, docs/benchmarks.md). One
+# called copy: H100, 2026-11-24, bunny-studio +14.5 %, sun +23.9 %, the Cornell box (no
+# principled material) unchanged. Also calling principled_sample, the environment lookups
+# or the scatter steps measured no better or worse; calling the traversal cost 12 %.
+NOINLINE = ("principled_eval",)
+
+
+def _call_not_inlined():
+    """Mark Numba's calls of the NOINLINE functions with LLVM's noinline call-site
+    attribute, so that NVVM keeps one copy of each. Numba offers no switch for it: the
+    calling convention that numba-cuda's device-function calls go through is wrapped. A
+    numba-cuda without it compiles inlined kernels (the same images, slower); the kernel
+    cache is keyed by this file's source, so a change here recompiles."""
+    try:
+        from numba.cuda.core.callconv import MinimalCallConv
+    except ImportError:
+        return
+    if getattr(MinimalCallConv, "_pt_render_noinline", False) or \
+            not hasattr(MinimalCallConv, "call_function"):
+        return
+    original = MinimalCallConv.call_function
+    # Itanium-style mangled names carry each name component with its length
+    marks = tuple(f"{len(name)}{name}" for name in NOINLINE)
+
+    def call_function(self, builder, callee, resty, argtys, args):
+        if "pathtracer" not in callee.name or not any(m in callee.name for m in marks):
+            return original(self, builder, callee, resty, argtys, args)
+        plain_call = builder.call
+
+        def call(fn, *rest, **kw):
+            instr = plain_call(fn, *rest, **kw)
+            if fn is callee:
+                instr.attributes.add("noinline")
+            return instr
+        builder.call = call
+        try:
+            return original(self, builder, callee, resty, argtys, args)
+        finally:
+            del builder.call
+
+    MinimalCallConv.call_function = call_function
+    MinimalCallConv._pt_render_noinline = True
+
+
+if not config.ENABLE_CUDASIM:
+    _call_not_inlined()
+
+
 def _aligned(d_scene):
     """The device scene, after checking what kernels.loads' 128-bit loads of BVH nodes
     need: 16-byte aligned rows (cuda.to_device allocates at 256-byte boundaries; a
