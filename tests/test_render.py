@@ -234,3 +234,29 @@ def test_path_regeneration_changes_no_bit(name):
     assert a.any() and (sa[..., L.STAT_BOUNCE_RAYS] > 0).any()
     np.testing.assert_array_equal(a, b)
     np.testing.assert_array_equal(sa, sb)
+
+
+def test_cpu_rows_interleaved_over_threads_give_the_same_image():
+    """The CPU backend deals rows to its threads interleaved (every thread gets rows from
+    the whole image): with 1 and 2 threads, on an image whose height no thread count
+    divides, every row is rendered once and the pass and the AOVs are the same bit for bit."""
+    import numba
+    from pathtracer.scene import compile_scene, load_scene_description
+    desc = load_scene_description(os.path.join(ROOT, "scenes", "cornell-box.json"))
+    desc.camera.resolution = (20, 13)
+    scene = compile_scene(desc)
+    before = numba.get_num_threads()
+    got = []
+    try:
+        for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+            numba.set_num_threads(threads)
+            backend = make_backend("cpu", scene)
+            out, stats = [x.copy() for x in backend.render_pass(0, 2, 3, 5, 3)]
+            got.append((out, stats, backend.aovs(2, 3)))
+    finally:
+        numba.set_num_threads(before)
+    (a, sa, va), (b, sb, vb) = got
+    assert (sa[..., L.STAT_BOUNCE_RAYS] > 0).all(axis=1).all()   # every row was rendered
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(sa, sb)
+    np.testing.assert_array_equal(va, vb)

@@ -1,8 +1,9 @@
-"""CPU backend: ``@njit(parallel=True)`` over image rows, compiled code cached on disk."""
+"""CPU backend: ``@njit(parallel=True)`` over image rows (interleaved over the threads),
+compiled code cached on disk."""
 import functools
 
 import numpy as np
-from numba import njit, prange
+from numba import get_num_threads, njit, prange
 
 from .._cache import jit_cache
 
@@ -20,7 +21,16 @@ def pass_kernel(features):
     @njit(parallel=True, nogil=True, cache=jit_cache(), error_model="numpy")
     def render_pass(out, stats, sample_start, n_samples, seed, max_bounces, rr_depth, scene,
                     active):
-        for py in prange(out.shape[0]):
+        height = out.shape[0]
+        threads = get_num_threads()
+        rows_per = (height + threads - 1) // threads
+        for k in prange(rows_per * threads):
+            # prange hands each thread a contiguous range of k; k -> row interleaves the
+            # rows, so every thread gets rows from the whole image (the sky and the object),
+            # not one band of it
+            py = (k % rows_per) * threads + k // rows_per
+            if py >= height:
+                continue
             stack = np.empty(STACK_SIZE, np.int32)   # BVH traversal scratch, one per row
             for px in range(out.shape[1]):
                 if active[py, px]:
@@ -40,7 +50,13 @@ def aov_kernel(features):
 
     @njit(parallel=True, nogil=True, cache=jit_cache(), error_model="numpy")
     def aov_pass(out, n_samples, seed, scene):
-        for py in prange(out.shape[0]):
+        height = out.shape[0]
+        threads = get_num_threads()
+        rows_per = (height + threads - 1) // threads
+        for k in prange(rows_per * threads):
+            py = (k % rows_per) * threads + k // rows_per     # interleaved, as render_pass
+            if py >= height:
+                continue
             stack = np.empty(STACK_SIZE, np.int32)
             for px in range(out.shape[1]):
                 aov_pixel(px, py, n_samples, seed, scene, stack, out)
