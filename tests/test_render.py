@@ -260,3 +260,25 @@ def test_cpu_rows_interleaved_over_threads_give_the_same_image():
     np.testing.assert_array_equal(a, b)
     np.testing.assert_array_equal(sa, sb)
     np.testing.assert_array_equal(va, vb)
+
+
+def test_cpu_pass_kernels_are_cacheable():
+    """The CPU pass and AOV kernels can go to the disk cache (a kernel that touches a
+    dynamic global, such as numba.get_num_threads() inside it, is compiled afresh in
+    every process, 7-14 s, with a NumbaWarning): rendering one leaves index files for both
+    in the kernel folder."""
+    import glob
+
+    from pathtracer import _cache
+    from pathtracer.scene import compile_scene, load_scene_description
+    if not _cache.jit_cache() or not _cache._state["folder"]:
+        pytest.skip("kernel disk cache off here")
+    desc = load_scene_description(os.path.join(ROOT, "scenes", "cornell-box.json"))
+    desc.camera.resolution = (4, 3)
+    backend = make_backend("cpu", compile_scene(desc))
+    backend.render_pass(0, 1, 0, 3, 3)
+    backend.aovs(1, 0)
+    names = [os.path.basename(f) for f in
+             glob.glob(os.path.join(_cache._state["folder"], "**", "*.nbi"), recursive=True)]
+    assert any("render_pass" in n and "cpu" in n for n in names), names[:20]
+    assert any("aov_pass" in n and "cpu" in n for n in names), names[:20]

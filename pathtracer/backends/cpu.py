@@ -20,9 +20,8 @@ def pass_kernel(features):
     # nogil: other Python threads (the live preview's server) run while a pass renders.
     @njit(parallel=True, nogil=True, cache=jit_cache(), error_model="numpy")
     def render_pass(out, stats, sample_start, n_samples, seed, max_bounces, rr_depth, scene,
-                    active):
+                    active, threads):
         height = out.shape[0]
-        threads = get_num_threads()
         rows_per = (height + threads - 1) // threads
         for k in prange(rows_per * threads):
             # prange hands each thread a contiguous range of k; k -> row interleaves the
@@ -49,9 +48,8 @@ def aov_kernel(features):
     aov_pixel = make_aov_pixel(features)
 
     @njit(parallel=True, nogil=True, cache=jit_cache(), error_model="numpy")
-    def aov_pass(out, n_samples, seed, scene):
+    def aov_pass(out, n_samples, seed, scene, threads):
         height = out.shape[0]
-        threads = get_num_threads()
         rows_per = (height + threads - 1) // threads
         for k in prange(rows_per * threads):
             py = (k % rows_per) * threads + k // rows_per     # interleaved, as render_pass
@@ -89,12 +87,16 @@ class CPUBackend:
     def aovs(self, n_samples, seed):
         """The denoiser's albedo and normal images (float32 H x W x AOV_WIDTH, see aov_pixel)."""
         out = np.zeros((self.scene.height, self.scene.width, AOV_WIDTH), np.float32)
-        aov_kernel(self.scene.features)(out, n_samples, seed, self.scene.arrays)
+        aov_kernel(self.scene.features)(out, n_samples, seed, self.scene.arrays,
+                                        get_num_threads())
         return out
 
     def render_pass(self, sample_start, n_samples, seed, max_bounces, rr_depth, active=None):
         """Sums over n_samples paths per pixel (float32 HxWx3) and ray/NaN counts (HxWx3);
         ``active`` (uint8 HxW, adaptive sampling): only the pixels where it is not 0."""
+        # (the thread count is an argument: get_num_threads() inside the kernel is a
+        # dynamic global, which Numba's disk cache refuses)
         self.kernel(self.out, self.stats, sample_start, n_samples, seed, max_bounces, rr_depth,
-                    self.scene.arrays, self.all_pixels if active is None else active)
+                    self.scene.arrays, self.all_pixels if active is None else active,
+                    get_num_threads())
         return self.out, self.stats
