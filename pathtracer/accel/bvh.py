@@ -54,6 +54,23 @@ def _centre(t_lo, t_hi, k, a):
 
 
 @njit(cache=jit_cache())
+def _range_bounds(t_lo, t_hi, start, end, lo, hi, clo, chi):
+    """Into lo/hi and clo/chi: the bounds of triangles start..end-1 and of their centres."""
+    for a in range(3):
+        lo[a] = np.inf
+        hi[a] = -np.inf
+        clo[a] = np.inf
+        chi[a] = -np.inf
+    for k in range(start, end):
+        for a in range(3):
+            lo[a] = min(lo[a], t_lo[k, a])
+            hi[a] = max(hi[a], t_hi[k, a])
+            m = _centre(t_lo, t_hi, k, a)
+            clo[a] = min(clo[a], m)
+            chi[a] = max(chi[a], m)
+
+
+@njit(cache=jit_cache())
 def _run(t_lo, t_hi, order, tasks, task_box, n_tasks, box, child, n_bins, max_leaf,
          min_leaf_split, midpoint, defer, deferred, deferred_box):
     """The build loop over the task stack ``tasks`` (rows: start, end, parent node, side,
@@ -91,18 +108,7 @@ def _run(t_lo, t_hi, order, tasks, task_box, n_tasks, box, child, n_bins, max_le
                 count >= min_leaf_split and depth < MAX_DEPTH:
             # another run builds this subtree; its box goes into the parent now
             if not tasks[n_tasks, 5]:
-                for a in range(3):
-                    lo[a] = np.inf
-                    hi[a] = -np.inf
-                    clo[a] = np.inf
-                    chi[a] = -np.inf
-                for k in range(start, end):
-                    for a in range(3):
-                        lo[a] = min(lo[a], t_lo[k, a])
-                        hi[a] = max(hi[a], t_hi[k, a])
-                        m = _centre(t_lo, t_hi, k, a)
-                        clo[a] = min(clo[a], m)
-                        chi[a] = max(chi[a], m)
+                _range_bounds(t_lo, t_hi, start, end, lo, hi, clo, chi)
                 for a in range(3):
                     task_box[n_tasks, a] = lo[a]
                     task_box[n_tasks, 3 + a] = hi[a]
@@ -128,19 +134,7 @@ def _run(t_lo, t_hi, order, tasks, task_box, n_tasks, box, child, n_bins, max_le
                 clo[a] = task_box[n_tasks, 6 + a]
                 chi[a] = task_box[n_tasks, 9 + a]
         else:
-            # Bounds of the range's triangles and of their centroids.
-            for a in range(3):
-                lo[a] = np.inf
-                hi[a] = -np.inf
-                clo[a] = np.inf
-                chi[a] = -np.inf
-            for k in range(start, end):
-                for a in range(3):
-                    lo[a] = min(lo[a], t_lo[k, a])
-                    hi[a] = max(hi[a], t_hi[k, a])
-                    m = _centre(t_lo, t_hi, k, a)
-                    clo[a] = min(clo[a], m)
-                    chi[a] = max(chi[a], m)
+            _range_bounds(t_lo, t_hi, start, end, lo, hi, clo, chi)
         # Find the best binned split.
         best_cost = np.inf
         best_axis = -1
@@ -167,8 +161,7 @@ def _run(t_lo, t_hi, order, tasks, task_box, n_tasks, box, child, n_bins, max_le
                 for a in range(3):
                     inv = inv0 if a == 0 else (inv1 if a == 1 else inv2)
                     if inv > 0.0:
-                        m = 0.5 * (np.float64(t_lo[k, a]) + np.float64(t_hi[k, a]))
-                        b = min(int((m - clo[a]) * inv), n_bins - 1)
+                        b = min(int((_centre(t_lo, t_hi, k, a) - clo[a]) * inv), n_bins - 1)
                         if bin_n[a, b] == 0:
                             bin_lo[a, b, 0] = x0
                             bin_lo[a, b, 1] = x1
@@ -335,8 +328,6 @@ def _run(t_lo, t_hi, order, tasks, task_box, n_tasks, box, child, n_bins, max_le
                     task_box[n_tasks, c] = side_b[q, c]
             n_tasks += 1
     return n_nodes, max_depth, n_deferred
-
-
 
 
 @njit(cache=jit_cache())

@@ -12,6 +12,15 @@ from ..kernels.layout import AOV_WIDTH
 from ..kernels.integrator import make_aov_pixel, make_render_pixel
 
 
+@njit(cache=jit_cache())
+def interleaved_row(k, rows_per, threads):
+    """The image row of the kernels' prange index k (0 <= k < rows_per * threads, rows_per
+    = ceil(height / threads); rows >= height are skipped). prange hands each thread a
+    contiguous range of k; this mapping gives thread j the rows j, j + threads, ..., so
+    every thread gets rows from the whole image (the sky and the object), not one band."""
+    return (k % rows_per) * threads + k // rows_per
+
+
 @functools.lru_cache(maxsize=None)
 def pass_kernel(features):
     render_pixel = make_render_pixel(features)
@@ -24,10 +33,7 @@ def pass_kernel(features):
         height = out.shape[0]
         rows_per = (height + threads - 1) // threads
         for k in prange(rows_per * threads):
-            # prange hands each thread a contiguous range of k; k -> row interleaves the
-            # rows, so every thread gets rows from the whole image (the sky and the object),
-            # not one band of it
-            py = (k % rows_per) * threads + k // rows_per
+            py = interleaved_row(k, rows_per, threads)
             if py >= height:
                 continue
             stack = np.empty(STACK_SIZE, np.int32)   # BVH traversal scratch, one per row
@@ -52,7 +58,7 @@ def aov_kernel(features):
         height = out.shape[0]
         rows_per = (height + threads - 1) // threads
         for k in prange(rows_per * threads):
-            py = (k % rows_per) * threads + k // rows_per     # interleaved, as render_pass
+            py = interleaved_row(k, rows_per, threads)
             if py >= height:
                 continue
             stack = np.empty(STACK_SIZE, np.int32)
