@@ -96,8 +96,8 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
     small later; ``headless`` (nobody sees the intermediate images): they grow 4x while 4x
     stays under ``pass_seconds``, as every pass costs a synchronisation, a copy and the
     film's sum (~10-20 ms for a 1024^2 image, which is what a split render over several
-    GPUs waits for at each pass). ``on_pass(film,
-    elapsed)`` is called after every pass (returning False ends the render). Ctrl-C (or any :class:`~.errors.Interrupted`)
+    GPUs waits for at each pass). ``on_pass(film, elapsed)`` is called after every pass
+    (returning False ends the render). Ctrl-C (or any :class:`~.errors.Interrupted`)
     stops the render and returns the samples of the passes completed (``interrupted`` and
     ``signal`` are set). A render never exceeds ``limits.MAX_SPP`` samples per pixel (the
     random streams are indexed by 32-bit sample numbers).
