@@ -19,13 +19,27 @@ A cache must never cost a render:
   damaged folder aside (``<folder>.damaged-<time>``), warns once, and compiles afresh into
   a new folder.
 - **Failed writes** (disk full): the kernel is used uncached, with one warning.
+- **Several processes at once** (a batch on Ray workers, a preview beside a render): Numba
+  updates a function's index without a lock (read the index, pick the first free data-file
+  number, write both). Two processes saving different kernels of one function (the same
+  closure, other scene features) at once both take the same number: one kernel is lost, and
+  when the index of one and the data file of the other win, a later run loads the other
+  scene's kernel for this one, a silently wrong image (seen once in CI). Loads and saves of
+  our folder therefore hold a lock on the function's index (``flock``: shared to load,
+  exclusive to save).
 """
+import contextlib
 import hashlib
 import os
 import sys
 import time
 
 import numba
+
+try:
+    import fcntl
+except ImportError:          # not POSIX: Numba's own (unlocked) behaviour
+    fcntl = None
 
 _state = {"enabled": True, "folder": None, "warned": set()}
 
@@ -119,6 +133,31 @@ def _quarantine(cache, error):
          "compiled afresh")
 
 
+@contextlib.contextmanager
+def index_lock(cache, exclusive):
+    """Hold an ``flock`` on ``<index file>.lock`` of a Numba cache: shared while loading (the
+    index and the data file it names are read as one), exclusive while saving. Where no
+    lock can be had (no fcntl, a folder that does not exist yet or cannot be written, a file
+    system without flock) this is Numba's unlocked behaviour."""
+    index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
+    fd = None
+    if fcntl is not None and index is not None:
+        try:
+            if exclusive:
+                os.makedirs(os.path.dirname(index), exist_ok=True)
+            fd = os.open(index + ".lock", os.O_RDWR | os.O_CREAT, 0o644)
+            fcntl.flock(fd, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
+        except OSError:
+            if fd is not None:
+                os.close(fd)
+            fd = None
+    try:
+        yield
+    finally:
+        if fd is not None:
+            os.close(fd)       # releases the lock
+
+
 def _guarded(cls):
     if getattr(cls, "_pt_render_guarded", False):
         return
@@ -128,7 +167,8 @@ def _guarded(cls):
         if not _ours(self):
             return load(self, sig, target_context)
         try:
-            return load(self, sig, target_context)
+            with index_lock(self, exclusive=False):
+                return load(self, sig, target_context)
         except Exception as e:    # unpickling errors of every kind: a damaged file
             _quarantine(self, e)
             return None           # a cache miss: Numba compiles
@@ -137,7 +177,8 @@ def _guarded(cls):
         if not _ours(self):
             return save(self, sig, data)
         try:
-            return save(self, sig, data)
+            with index_lock(self, exclusive=True):
+                return save(self, sig, data)
         except Exception as e:    # disk full, folder removed, damaged index
             warn(f"could not write the kernel cache in {_state['folder']} "
                  f"({getattr(e, 'strerror', None) or type(e).__name__}); the kernels work "

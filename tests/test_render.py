@@ -109,7 +109,10 @@ def test_constant_environment(tmp_path, backend):
     }
     scene = load_scene(write_scene(tmp_path, scene_dict))
     img = run(scene, backend, spp=16).film.image()
-    assert np.allclose(img, 0.6 * np.array(sky), rtol=1e-5)
+    expected = 0.6 * np.array(sky)
+    off = np.argwhere(~np.isclose(img, expected, rtol=1e-5))
+    assert len(off) == 0, f"{len(off)} values off, first {off[:4].tolist()}: " \
+        f"{[img[tuple(i)] for i in off[:4]]}"
     img0 = run(scene, backend, spp=4, max_bounces=0).film.image()
     assert np.all(img0 == 0)
 

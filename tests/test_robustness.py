@@ -519,6 +519,76 @@ def test_full_disk_while_writing_the_cache_still_runs(tmp_path):
     assert "could not write the kernel cache" in r.stderr and "Traceback" not in r.stderr
 
 
+RACER = textwrap.dedent("""
+    import os, sys, time
+    import pathtracer                      # configures the cache and its guards
+    from numba import njit
+    from numba.core import caching
+    k, folder, delay = int(sys.argv[1]), sys.argv[2], float(sys.argv[3])
+    if delay:
+        # widen Numba's window between reading a function's index and writing it back, so
+        # that the processes' saves overlap for certain
+        read_index = caching.IndexDataCacheFile._load_index
+        def slow_read_index(self):
+            index = read_index(self)
+            time.sleep(delay)
+            return index
+        caching.IndexDataCacheFile._load_index = slow_read_index
+    sys.path.insert(0, folder)
+    import racer_mod
+    f = racer_mod.make(k)
+    if delay:                              # start together
+        open(os.path.join(folder, f"ready-{k}"), "w").close()
+        while not os.path.exists(os.path.join(folder, "go")):
+            time.sleep(0.01)
+    value = f()
+    print(value, sum(f.stats.cache_hits.values()))
+""")
+RACER_MOD = textwrap.dedent("""
+    from numba import njit
+
+    def make(k):
+        # one function, a kernel per closure value: the shape of pt-render's kernels, which
+        # are closures over the scene's features
+        @njit(cache=True)
+        def kernel():
+            return k * 1000 + 7
+        return kernel
+""")
+
+
+def test_concurrent_processes_keep_every_kernel_in_the_cache(tmp_path):
+    """Three processes compile three kernels of one cached function at the same moment;
+    afterwards each kernel loads from the cache and is its own (Numba alone loses all but
+    one of them here, and can hand one scene's kernel to another)."""
+    n = 3
+    folder = tmp_path / "mod"
+    folder.mkdir()
+    (folder / "racer_mod.py").write_text(RACER_MOD)
+    env = dict(os.environ, PT_RENDER_CACHE=str(tmp_path / "cache"), PYTHONPATH=ROOT)
+    env.pop("NUMBA_CACHE_DIR", None)
+
+    def racer(k, delay):
+        return subprocess.Popen([sys.executable, "-c", RACER, str(k), str(folder), str(delay)],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                env=env, cwd=str(tmp_path))
+    procs = [racer(k, 0.5) for k in range(n)]
+    deadline = time.time() + 120
+    while (not all((folder / f"ready-{k}").exists() for k in range(n))
+           and time.time() < deadline and all(p.poll() is None for p in procs)):
+        time.sleep(0.01)
+    (folder / "go").touch()
+    for k, p in enumerate(procs):
+        out, err = p.communicate(timeout=120)
+        assert p.returncode == 0, err
+        assert out.split()[0] == str(k * 1000 + 7)
+    for k in range(n):                     # one at a time: every kernel is a cache hit
+        p = racer(k, 0)
+        out, err = p.communicate(timeout=120)
+        assert p.returncode == 0, err
+        assert out.split() == [str(k * 1000 + 7), "1"], f"kernel {k}: {out} {err}"
+
+
 def test_unsupported_mesh_format_is_an_error(tmp_path, capsys):
     (tmp_path / "m.stl").write_text("solid m\nendsolid m\n")
     scene = {"camera": {"resolution": [4, 3]}, "objects": [{"name": "m", "file": "m.stl"}]}
