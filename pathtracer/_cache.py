@@ -27,10 +27,23 @@ A cache must never cost a render:
   scene's kernel for this one, a silently wrong image (seen once in CI). Loads and saves of
   our folder therefore hold a lock on the function's index (``flock``: shared to load,
   exclusive to save).
+- **Kernels compiled in different processes, loaded into one.** Numba names a compiled
+  function's symbol after its qualified name, argument types and a counter that starts at
+  1 in every process. Closures of one factory for two scenes (``render_pass``,
+  ``direct_light``, ... with other features) compiled first thing in two processes get the
+  same names; both go to the disk cache, and a process that loads the two links the second
+  kernel to the first one's functions (one definition per name): the second scene rendered
+  with the first scene's code, black in the test (and the cause of a CI failure). The
+  counter therefore starts at a random 60-bit number in every process
+  (:func:`unique_symbol_names`): names stay unique within a process, as Numba needs, and no
+  longer repeat across processes. The cache's index keys do not contain them, so cache hits
+  are unchanged.
 """
 import contextlib
 import hashlib
+import itertools
 import os
+import secrets
 import sys
 import time
 
@@ -86,9 +99,20 @@ def writable(folder):
         return e.strerror or str(e)
 
 
+def unique_symbol_names():
+    """Start Numba's per-process function counter (part of every compiled symbol's name) at
+    a random 60-bit number, so that functions compiled in different processes never share
+    a symbol name (see the module's docstring). Idempotent."""
+    from numba.core import bytecode
+    if not getattr(bytecode.FunctionIdentity, "_pt_render_unique", False):
+        bytecode.FunctionIdentity._unique_ids = itertools.count(secrets.randbits(60) + 1)
+        bytecode.FunctionIdentity._pt_render_unique = True
+
+
 def configure():
     """Point Numba's cache at this version's kernel folder (unless NUMBA_CACHE_DIR is set),
     or turn disk caching off if that folder cannot be written."""
+    unique_symbol_names()
     folder = os.environ.get("NUMBA_CACHE_DIR") or os.path.join(cache_root(), "numba",
                                                                source_hash())
     reason = writable(folder)

@@ -589,6 +589,51 @@ def test_concurrent_processes_keep_every_kernel_in_the_cache(tmp_path):
         assert out.split() == [str(k * 1000 + 7), "1"], f"kernel {k}: {out} {err}"
 
 
+KERNEL_PROBE = textwrap.dedent("""
+    import sys
+    import numpy as np
+    import pathtracer as pt
+    s = 50.0
+    for what in sys.argv[1:]:
+        scene = {"camera": {"resolution": [6, 4], "position": [0, 0, 3], "lookAt": [0, 0, 0],
+                            "up": [0, 1, 0], "fov": 20},
+                 "render": {"maxBounces": 1, "spp": 4},
+                 "materials": [{"name": "m", "type": "diffuse", "albedo": 0.8}],
+                 "objects": [{"name": "plane", "vertices": [[-s, -s, 0], [s, -s, 0], [s, s, 0],
+                                                           [-s, s, 0]],
+                              "faces": [[0, 1, 2], [0, 2, 3]], "material": "m"}]}
+        if what == "sky":
+            scene["environment"] = {"color": [0.5, 1.0, 2.0]}
+        elif what == "lamp":
+            scene["lights"] = [{"type": "point", "position": [0, 0, 1], "intensity": 2.0}]
+        else:       # warm-up: another feature set
+            scene["camera"].update(aperture=8.0, focusDistance=3.0)
+            scene["environment"] = {"color": [1.0, 1.0, 1.0]}
+        print(what, repr(float(pt.render(pt.load_scene(scene), backend="cpu").image.mean())))
+""")
+
+
+def test_kernels_compiled_in_different_processes_load_together(tmp_path):
+    """Two scenes' CPU kernels, each compiled first thing in its own process (after a
+    third process filled the cache with everything else), then loaded from the cache into
+    one process: each still renders its own scene (Numba gave both kernels' functions the
+    same symbols, and the second scene rendered with the first scene's code, until every
+    process numbered its symbols from its own random start: _cache.unique_symbol_names)."""
+    env = dict(os.environ, PT_RENDER_CACHE=str(tmp_path / "cache"), PYTHONPATH=ROOT)
+    env.pop("NUMBA_CACHE_DIR", None)
+
+    def probe(*what):
+        r = subprocess.run([sys.executable, "-c", KERNEL_PROBE, *what], capture_output=True,
+                           text=True, env=env, cwd=str(tmp_path), timeout=600)
+        assert r.returncode == 0, r.stderr[-3000:]
+        return dict(line.split() for line in r.stdout.splitlines())
+    probe("warm-up")
+    alone = {**probe("sky"), **probe("lamp")}
+    assert float(alone["sky"]) > 0 and float(alone["lamp"]) > 0
+    assert probe("sky", "lamp") == alone
+    assert probe("lamp", "sky") == alone
+
+
 def test_unsupported_mesh_format_is_an_error(tmp_path, capsys):
     (tmp_path / "m.stl").write_text("solid m\nendsolid m\n")
     scene = {"camera": {"resolution": [4, 3]}, "objects": [{"name": "m", "file": "m.stl"}]}
