@@ -12,6 +12,8 @@ from pathtracer.accel import build_bvh, sah_cost
 from pathtracer.kernels.constants import INF, STACK_SIZE
 from pathtracer.kernels.intersect import ray_triangle
 from pathtracer.kernels.traverse import _load_node, any_hit, closest_hit
+from pathtracer.kernels.wide import any_hit_wide, closest_hit_wide
+from pathtracer.accel.wide import WIDE_STACK_SIZE, widen_bvh
 from pathtracer.scene.meshes import load_obj
 from tests.conftest import SHARED, needs_shared
 
@@ -39,6 +41,27 @@ def trace_all(origins, dirs, tri_v, box, child, skips):
         out_i[k] = i
         out_any[k] = any_hit(o, d, INF, skips[k], -1, tri_v, box, child, stack)
     return out_t, out_i, out_any
+
+
+@njit(cache=True)
+def trace_all_wide(origins, dirs, tri_v, wide, wchild, skips, skips_b):
+    n = origins.shape[0]
+    out_t = np.empty(n, np.float32)
+    out_i = np.empty(n, np.int32)
+    out_b = np.empty((n, 2), np.float32)
+    out_any = np.empty(n, np.bool_)
+    stack = np.empty(WIDE_STACK_SIZE, np.int32)
+    for k in range(n):
+        o = (origins[k, 0], origins[k, 1], origins[k, 2])
+        d = (dirs[k, 0], dirs[k, 1], dirs[k, 2])
+        t, i, b1, b2 = closest_hit_wide(o, d, INF, skips[k], tri_v, wide, wchild, stack)
+        out_t[k] = t
+        out_i[k] = i
+        out_b[k, 0] = b1
+        out_b[k, 1] = b2
+        out_any[k] = any_hit_wide(o, d, INF, skips[k], skips_b[k], tri_v, wide, wchild,
+                                  stack)
+    return out_t, out_i, out_b, out_any
 
 
 @njit(cache=True)
@@ -79,7 +102,79 @@ def check_against_brute_force(pos, origins, dirs, skips=None, **options):
     same = (i == ib) | (t == tb)
     assert same.all()
     assert np.array_equal(a, ib >= 0)   # any-hit agrees with the existence of a hit
+    # The CPU's four-wide tree (kernels.wide): the same hits, bit for bit, from the same
+    # arithmetic in SIMD form; any-hit also with a second skipped triangle (its hit).
+    wide, wchild = widen_bvh(tri_v, bvh.box, bvh.child)
+    check_wide_structure(bvh, wide, wchild, tri_v, len(pos))
+    tw, iw, bw, aw = trace_all_wide(origins, dirs, tri_v, wide, wchild, skips,
+                                    np.full(len(origins), -1, np.int32))
+    assert np.array_equal(tw, tb)
+    assert ((iw == ib) | (tw == tb)).all()
+    assert np.array_equal(aw, ib >= 0)
+    for k in np.nonzero(iw >= 0)[0][:200]:       # the barycentrics are ray_triangle's
+        o, d = tuple(origins[k]), tuple(dirs[k])
+        assert ray_triangle(o, d, tri_v, iw[k], INF) == (tw[k], bw[k, 0], bw[k, 1])
+    _, _, _, aw2 = trace_all_wide(origins, dirs, tri_v, wide, wchild, skips, ib)
+    _, ib2 = brute_force_two(origins, dirs, tri_v, len(pos), skips, ib)
+    assert np.array_equal(aw2, ib2 >= 0)
     return bvh, t, i
+
+
+@njit(cache=True)
+def brute_force_two(origins, dirs, tri_v, n_tri, skips, skips_b):
+    """brute_force with a second skipped triangle per ray."""
+    n = origins.shape[0]
+    out_t = np.empty(n, np.float32)
+    out_i = np.empty(n, np.int32)
+    for k in range(n):
+        o = (origins[k, 0], origins[k, 1], origins[k, 2])
+        d = (dirs[k, 0], dirs[k, 1], dirs[k, 2])
+        best = INF
+        best_i = -1
+        for i in range(n_tri):
+            if i == skips[k] or i == skips_b[k]:
+                continue
+            t, b1, b2 = ray_triangle(o, d, tri_v, i, best)
+            if t < best:
+                best = t
+                best_i = i
+        out_t[k] = best
+        out_i[k] = best_i
+    return out_t, out_i
+
+
+def check_wide_structure(bvh, wide, wchild, tri_v, n):
+    """Every triangle in exactly one wide leaf, packed in its lane; every wide child box is
+    one of the binary tree's boxes; inner children point at later nodes; the traversal
+    stack suffices."""
+    seen = np.zeros(n, int)
+    binary_boxes = {tuple(b) for b in bvh.box.reshape(-1, 6).tolist()}
+    flat = wide.reshape(-1)
+    n_nodes = len(wchild)
+    depth = np.zeros(n_nodes, int)
+    depth[0] = 1
+    for k in range(n_nodes):
+        node = flat[24 * k:24 * k + 24]
+        for j in range(4):
+            cnt = wchild[k, 4 + j]
+            box = tuple(node[[j, 4 + j, 8 + j, 12 + j, 16 + j, 20 + j]].tolist())
+            if cnt < 0:
+                assert np.isnan(box).all()
+                continue
+            assert box in binary_boxes
+            if cnt == 0:
+                row = wchild[k, j]
+                assert row % 2 == 0 and k < row // 2 < n_nodes
+                depth[row // 2] = depth[k] + 1
+            else:
+                first, row = wchild[k, 8 + j], wchild[k, j]
+                assert row >= 2 * n_nodes
+                seen[first:first + cnt] += 1
+                for t in range(cnt):
+                    group = flat[12 * (row + 3 * (t // 4)):][:36]
+                    assert np.array_equal(group[t % 4::4], tri_v[first + t])
+    assert (seen == 1).all()
+    assert 3 * depth.max() + 1 <= WIDE_STACK_SIZE
 
 
 def check_structure(bvh, pos):
@@ -264,3 +359,25 @@ def test_node_loads_read_the_node_layout(rng):
     assert np.array_equal(_load_nodes(bvh.box, bvh.child), want)
     for k in (0, len(bvh.box) // 2, len(bvh.box) - 1):
         assert np.array_equal(np.array(_load_node(bvh.box, bvh.child, k), np.float64), want[k])
+
+
+def test_wide_traversal_interpreted_matches_compiled(rng):
+    """The four-wide traversal run as plain Python (the vector tests' Python forms,
+    kernels.wide.slab4 / triangles4) finds what the compiled SIMD code finds."""
+    pos = rng.random((300, 3, 3)).astype(np.float32)
+    pos[:, 1:] = pos[:, :1] + 0.3 * (pos[:, 1:] - 0.5)       # small triangles in a cube
+    bvh = build_bvh(pos)
+    tri_v = tri_rows(pos[bvh.order])
+    wide, wchild = widen_bvh(tri_v, bvh.box, bvh.child)
+    origins, dirs = random_rays(rng, 60, np.zeros(3), np.ones(3))
+    origins, dirs = origins.astype(np.float32), dirs.astype(np.float32)
+    skips = np.full(len(origins), -1, np.int32)
+    tw, iw, bw, aw = trace_all_wide(origins, dirs, tri_v, wide, wchild, skips, skips)
+    stack = np.empty(WIDE_STACK_SIZE, np.int32)
+    with np.errstate(all="ignore"):
+        for k in range(len(origins)):
+            o, d = tuple(origins[k]), tuple(dirs[k])
+            t, i, b1, b2 = closest_hit_wide(o, d, INF, -1, tri_v, wide, wchild, stack)
+            assert (t, i, b1, b2) == (tw[k], iw[k], bw[k, 0], bw[k, 1])
+            assert any_hit_wide(o, d, INF, -1, -1, tri_v, wide, wchild, stack) == aw[k]
+    assert (iw >= 0).sum() > 10

@@ -166,8 +166,10 @@ render_pixel = make_render_pixel(Features(*(bool(int(c)) for c in sys.argv[2])))
 def one_pixel(out, stats, stack, scene_arrays):
     render_pixel(0, 0, 0, 1, 0, 3, 5, scene_arrays, stack, out, stats)
 
+from pathtracer.accel.wide import WIDE_STACK_SIZE
+from pathtracer.backends.cpu import cpu_arrays
 one_pixel(np.zeros((1, 1, 3), np.float32), np.zeros((1, 1, 3), np.int32),
-          np.zeros(64, np.int32), scene.arrays)
+          np.zeros(WIDE_STACK_SIZE, np.int32), cpu_arrays(scene.arrays)[0])
 print(sum(len(x) for x in one_pixel.inspect_llvm().values()))
 """
 
@@ -250,14 +252,15 @@ def test_cpu_rows_interleaved_over_threads_give_the_same_image():
     desc.camera.resolution = (20, 13)
     scene = compile_scene(desc)
     render_pass, aov_pass = cpu.pass_kernel(scene.features), cpu.aov_kernel(scene.features)
+    arrays = cpu.cpu_arrays(scene.arrays)[0]
     active = np.ones((13, 20), np.uint8)
     got = []
     for threads in (1, 2, 3, 7, 16):
         out = np.zeros((13, 20, 3), np.float32)
         stats = np.zeros((13, 20, 3), np.int32)
         aov = np.zeros((13, 20, L.AOV_WIDTH), np.float32)
-        render_pass(out, stats, 0, 2, 3, 5, 3, scene.arrays, active, threads)
-        aov_pass(aov, 2, 3, scene.arrays, threads)
+        render_pass(out, stats, 0, 2, 3, 5, 3, arrays, active, threads)
+        aov_pass(aov, 2, 3, arrays, threads)
         got.append((out, stats, aov))
     a, sa, va = got[0]
     assert (sa[..., L.STAT_BOUNCE_RAYS] > 0).all(axis=1).all()   # every row was rendered

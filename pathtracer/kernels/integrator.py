@@ -39,6 +39,7 @@ from .scatter import make_scatter
 from .surface import make_surface
 from .textures import NO_FOOTPRINT, cone_footprint
 from .traverse import any_hit, closest_hit
+from .wide import any_hit_wide, closest_hit_wide
 from .vec import (add, cross, dot, load3, madd, max_comp, mul, neg, normalize, scale,
                   to_world)
 from .warps import power_heuristic
@@ -103,6 +104,11 @@ def make_kernels(features, target="cpu"):
     ANY_ENVIRONMENT = S.any_environment
     NEE = S.nee
     MIPMAPS = S.mipmaps
+    # The CPU traverses the four-wide BVH (kernels.wide: SIMD box and triangle tests), whose
+    # arrays its backend puts in the scene's bvh_box and bvh_child; the GPU the binary one.
+    WIDE = target == "cpu"
+    trace_closest = closest_hit_wide if WIDE else closest_hit
+    trace_any = any_hit_wide if WIDE else any_hit
     start_path, open_set, draw = make_sampler(S.sobol)
     surface = make_surface(features, target)
     scatter = make_scatter(features, target)
@@ -186,8 +192,8 @@ def make_kernels(features, target="cpu"):
                                  ng, wp)
         if not (max_comp(f) > ZERO):
             return (ZERO, ZERO, ZERO), 0
-        if any_hit(leave(p, ng, wi, origin), wi, t_max, own_skip(tri, ng_tri, ng, wi),
-                   light_tri, tri_v, bvh_box, bvh_child, stack):
+        if trace_any(leave(p, ng, wi, origin), wi, t_max, own_skip(tri, ng_tri, ng, wi),
+                     light_tri, tri_v, bvh_box, bvh_child, stack):
             return (ZERO, ZERO, ZERO), 1
         le = environment_radiance(env_img, env_info, wi, le, is_delta, light_tri)
         if is_delta:
@@ -206,8 +212,8 @@ def make_kernels(features, target="cpu"):
         made the next ray, counted even where Russian roulette then ends the path) and
         whether the path goes on."""
         n_shadow_rays = 0
-        t, tri, b1, b2 = closest_hit(o, d, INF, skip, scene.tri_v, scene.bvh_box,
-                                     scene.bvh_child, stack)
+        t, tri, b1, b2 = trace_closest(o, d, INF, skip, scene.tri_v, scene.bvh_box,
+                                       scene.bvh_child, stack)
         if tri < 0:
             if ANY_ENVIRONMENT:
                 le, weight = escaped(scene.env, scene.env_img, scene.env_pdf,
@@ -352,8 +358,8 @@ def make_kernels(features, target="cpu"):
         n_bounce_rays = 0
         n_shadow_rays = 0
         while True:
-            t, tri, b1, b2 = closest_hit(o, d, INF, skip, scene.tri_v, scene.bvh_box,
-                                         scene.bvh_child, stack)
+            t, tri, b1, b2 = trace_closest(o, d, INF, skip, scene.tri_v, scene.bvh_box,
+                                           scene.bvh_child, stack)
             if tri < 0:
                 if ANY_ENVIRONMENT:
                     le, weight = escaped(scene.env, scene.env_img, scene.env_pdf,
@@ -467,8 +473,8 @@ def make_kernels(features, target="cpu"):
             albedo = (ZERO, ZERO, ZERO)
             normal = (ZERO, ZERO, ZERO)
             for bounce in range(AOV_MAX_SPECULAR + 1):
-                t, tri, b1, b2 = closest_hit(o, d, INF, skip, scene.tri_v, scene.bvh_box,
-                                             scene.bvh_child, stack)
+                t, tri, b1, b2 = trace_closest(o, d, INF, skip, scene.tri_v, scene.bvh_box,
+                                               scene.bvh_child, stack)
                 if tri < 0:
                     if ANY_ENVIRONMENT:
                         le, weight = escaped(scene.env, scene.env_img, scene.env_pdf,
