@@ -487,10 +487,11 @@ def section_scaling(backend_name, meshes, res, spp, repeats, r):
         out.append(rec)
         n = rec["triangles"]
         for k in ("triangles", "load_s", "bvh_build_s", "bvh_nodes", "paths_per_s",
-                  "ns_per_path", "host_bytes", "peak_rss_bytes", "device_bytes"):
+                  "ns_per_path", "host_bytes", "peak_rss_bytes", "device_bytes", "widen_s",
+                  "wide_nodes", "wide_bytes"):
             if k in rec:
                 r.add("scaling", label, f"pt-render {backend_name}", k, rec[k], "")
-        for k in ("host_bytes", "host_geometry_bytes", "device_bytes"):
+        for k in ("host_bytes", "host_geometry_bytes", "device_bytes", "wide_bytes"):
             if k in rec:
                 r.add("scaling", label, f"pt-render {backend_name}", k + "_per_triangle",
                       rec[k] / n, "B")
@@ -676,17 +677,20 @@ def summary(r, res, args):
     if res["scaling"]:
         lines += ["", "## Scaling with the triangle count", "",
                   "| mesh | triangles | load s (cached?) | BVH build s | M camera paths/s | "
-                  "ns per path | host B/triangle (geometry) | device B/triangle | peak RSS MB |",
-                  "|---|---|---|---|---|---|---|---|---|"]
+                  "ns per path | host B/triangle (geometry) | device B/triangle | peak RSS MB | "
+                  "CPU wide tree: nodes, B/triangle, collapse s |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
         for x in res["scaling"]:
             n = x["triangles"]
             dev = f"{x['device_bytes'] / n:.0f}" if "device_bytes" in x else "n/a"
+            wide = (f"{x['wide_nodes']}, {x['wide_bytes'] / n:.0f}, {x['widen_s']:.3g}"
+                    if "wide_nodes" in x else "n/a")
             lines.append(f"| {x['mesh']} | {n} | {x['load_s']:.3g} "
                          f"({'yes' if x['load_from_cache'] else 'no'}) | "
                          f"{x['bvh_build_s']:.3g} | {x['paths_per_s'] / 1e6:.3g} | "
                          f"{x['ns_per_path']:.3g} | {x['host_bytes'] / n:.0f} "
                          f"({x['host_geometry_bytes'] / n:.0f}) | {dev} | "
-                         f"{x['peak_rss_bytes'] / 1e6:.0f} |")
+                         f"{x['peak_rss_bytes'] / 1e6:.0f} | {wide} |")
         for row in r.rows:
             if row["metric"] == "time_per_path_exponent":
                 lines += ["", f"Time per path grows as N^{row['result']:.3f} over the dragon "

@@ -71,6 +71,14 @@ def measure(obj, backend_name, res, spp, repeats):
         rec["device_bytes"] = int(free0 - ctx.get_memory_info()[0] - film)
     else:
         backend = make_backend(backend_name, scene)
+    if backend_name == "cpu":
+        # the CPU's four-wide tree (kernels.wide), collapsed from the binary one per backend
+        from pathtracer.backends.cpu import cpu_arrays
+        t0 = time.perf_counter()
+        _, (_, (wide, wchild)) = cpu_arrays(scene.arrays)
+        rec["widen_s"] = time.perf_counter() - t0
+        rec["wide_nodes"] = int(len(wchild))
+        rec["wide_bytes"] = int(wide.nbytes + wchild.nbytes)
     backend.compile()
     backend.render_pass(0, spp, 0, scene.max_bounces, scene.rr_depth)     # warm-up
     t, _ = median_time(lambda: backend.render_pass(0, spp, 0, scene.max_bounces,

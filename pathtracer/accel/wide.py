@@ -23,8 +23,65 @@ WIDE_STACK_SIZE = 3 * STACK_SIZE + 4
 
 
 @njit(cache=jit_cache())
-def _collapse(box, child):
+def _small_subtrees(child, limit):
+    """For every binary node: (first, count) of the triangles under it when they are at most
+    ``limit`` and one contiguous range (count 0 otherwise). Such a subtree becomes one leaf
+    of the wide tree: its triangles take one or two SIMD tests, fewer than the boxes that
+    would lead to them (the SAH builder split them for one-at-a-time tests)."""
+    n = child.shape[0]
+    first = np.full(n, -1, np.int64)
+    end = np.full(n, -1, np.int64)
+    count = np.zeros(n, np.int64)
+    order = np.empty(n, np.int64)       # pre-order; reversed, children come before parents
+    stack = np.empty(n + 1, np.int64)
+    stack[0] = 0
+    sp = 1
+    m = 0
+    while sp > 0:
+        sp -= 1
+        b = stack[sp]
+        order[m] = b
+        m += 1
+        for s in range(2):
+            if child[b, s * CHILD_STRIDE + CHILD_COUNT] == 0:
+                stack[sp] = child[b, s * CHILD_STRIDE + CHILD_INDEX]
+                sp += 1
+    for q in range(m - 1, -1, -1):
+        b = order[q]
+        lo = np.int64(-1)
+        hi = np.int64(-1)
+        total = np.int64(0)
+        ok = True
+        for s in range(2):
+            c = np.int64(child[b, s * CHILD_STRIDE + CHILD_INDEX])
+            cnt = np.int64(child[b, s * CHILD_STRIDE + CHILD_COUNT])
+            if cnt == 0:
+                if count[c] == 0:
+                    ok = False
+                    continue
+                c_lo, c_hi, cnt = first[c], end[c], count[c]
+            elif cnt > 0:
+                c_lo, c_hi = c, c + cnt
+            else:
+                continue
+            if total == 0:
+                lo, hi = c_lo, c_hi
+            elif c_lo == hi:
+                hi = c_hi
+            elif c_hi == lo:
+                lo = c_lo
+            else:
+                ok = False
+            total += cnt
+        if ok and 0 < total <= limit:
+            first[b], end[b], count[b] = lo, hi, total
+    return first, count
+
+
+@njit(cache=jit_cache())
+def _collapse(box, child, merge):
     n = box.shape[0]
+    sub_first, sub_count = _small_subtrees(child, merge)
     wbox = np.full((n, NODE_ROWS * WIDE_ROW), np.nan, np.float32)
     wchild = np.zeros((n, WCHILD_WIDTH), np.int32)
     wchild[:, WCHILD_COUNT:WCHILD_COUNT + LANES] = -1
@@ -52,6 +109,9 @@ def _collapse(box, child):
                 kid_box[k, :] = box[b, s * BOX_STRIDE:(s + 1) * BOX_STRIDE]
                 kid_index[k] = child[b, s * CHILD_STRIDE + CHILD_INDEX]
                 kid_count[k] = child[b, s * CHILD_STRIDE + CHILD_COUNT]
+                if kid_count[k] == 0 and sub_count[kid_index[k]] > 0:
+                    kid_count[k] = sub_count[kid_index[k]]
+                    kid_index[k] = sub_first[kid_index[k]]
                 k += 1
         while k < LANES:
             best = -1
@@ -76,6 +136,9 @@ def _collapse(box, child):
                     kid_box[j, :] = box[inner, s * BOX_STRIDE:(s + 1) * BOX_STRIDE]
                     kid_index[j] = child[inner, s * CHILD_STRIDE + CHILD_INDEX]
                     kid_count[j] = child[inner, s * CHILD_STRIDE + CHILD_COUNT]
+                    if kid_count[j] == 0 and sub_count[kid_index[j]] > 0:
+                        kid_count[j] = sub_count[kid_index[j]]
+                        kid_index[j] = sub_first[kid_index[j]]
                     if placed == 1:
                         k += 1
                     placed += 1
@@ -131,9 +194,10 @@ def _pack(tri_v, wbox, wchild):
     return wide
 
 
-def widen_bvh(tri_v, bvh_box, bvh_child):
-    """(wide, wchild) of kernels.wide from a scene's binary BVH arrays and triangles."""
+def widen_bvh(tri_v, bvh_box, bvh_child, merge=LANES):
+    """(wide, wchild) of kernels.wide from a scene's binary BVH arrays and triangles;
+    subtrees of at most ``merge`` triangles become one leaf."""
     assert bvh_box.shape[1] == BOX_WIDTH and tri_v.shape[1] == TRI_V_WIDTH
-    wbox, wchild, depth = _collapse(bvh_box, bvh_child)
+    wbox, wchild, depth = _collapse(bvh_box, bvh_child, merge)
     assert 3 * depth + 1 <= WIDE_STACK_SIZE, depth
     return _pack(tri_v, wbox, wchild), wchild
