@@ -1,0 +1,171 @@
+"""Where the CPU render kernel spends its time, per compiled function (Linux ``perf``):
+
+    python -m bench.cpu_profile bunny-studio --seconds 20 --json out.json
+
+Runs itself under ``perf record`` (1999 samples/s per thread): the child compiles the scene's
+CPU kernel, writes the address and size of every function Numba compiled for it (from each
+library's object code and ``nm``), then renders passes of ``--spp`` for ``--seconds``. The
+parent attributes each sampled instruction address to the function that holds it. Shares are
+of the samples inside the kernel's own code (compilation, Python and the thread pool are
+counted apart as "outside"). Functions that Numba/LLVM inlined are counted in their caller:
+the table shows what remains a call (on the CPU most device functions are inlined into
+``render_sample``; traversal, environment lookups and the principled evaluation are not).
+The child compiles into a fresh kernel cache (a kernel loaded from the disk cache keeps no
+object code to read the symbols from). Needs ``perf`` and ``nm`` (binutils); no hardware
+counters are needed (a VM works).
+"""
+import argparse
+import bisect
+import collections
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+
+from bench.scenes import CONVERGENCE, convergence_desc
+
+
+def _libraries(dispatcher):
+    seen = []
+
+    def walk(lib):
+        if lib not in seen:
+            seen.append(lib)
+            for other in getattr(lib, "_linking_libraries", ()):
+                walk(other)
+    for cres in dispatcher.overloads.values():
+        walk(cres.library)
+    return seen
+
+
+def child(args):
+    """Compile, write the symbol table, render for args.seconds."""
+    from pathtracer.backends import make_backend
+    from pathtracer.scene import compile_scene
+    scene = compile_scene(convergence_desc(args.scene))
+    backend = make_backend("cpu", scene)
+    backend.compile()
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for k, lib in enumerate(_libraries(backend.kernel)):
+            try:
+                data = lib.serialize_using_object_code()
+            except Exception:                 # e.g. helper libraries without object code
+                continue
+            obj = data[2][0] if isinstance(data[2], tuple) else data[2]
+            path = os.path.join(tmp, f"{k}.o")
+            with open(path, "wb") as f:
+                f.write(obj)
+            nm = subprocess.run(["nm", "-S", "--defined-only", path], capture_output=True,
+                                text=True).stdout
+            for line in nm.splitlines():
+                parts = line.split()
+                if len(parts) == 4 and parts[2] in "tT":
+                    try:
+                        addr = lib.get_pointer_to_function(parts[3])
+                    except Exception:
+                        continue
+                    if addr:
+                        rows.append((addr, int(parts[1], 16), parts[3]))
+    with open(args.syms, "w") as f:
+        json.dump(rows, f)
+    backend.render_pass(0, 1, 0, scene.max_bounces, scene.rr_depth)
+    t0 = time.perf_counter()
+    passes = 0
+    while time.perf_counter() - t0 < args.seconds:
+        backend.render_pass(0, args.spp, 0, scene.max_bounces, scene.rr_depth)
+        passes += 1
+    elapsed = time.perf_counter() - t0
+    paths = passes * args.spp * scene.width * scene.height
+    print(json.dumps({"passes": passes, "seconds": elapsed,
+                      "m_paths_per_s": paths / elapsed / 1e6}))
+
+
+def short_name(symbol):
+    """'principled.principled_eval' from a Numba-mangled symbol (Itanium: length-prefixed
+    names after _ZN, up to Numba's 'B' + ABI tag)."""
+    words, i = [], symbol.find("_ZN") + 3
+    if i < 3:
+        return symbol[:60]
+    while i < len(symbol) and symbol[i].isdigit():
+        j = i
+        while symbol[j].isdigit():
+            j += 1
+        n = int(symbol[i:j])
+        words.append(symbol[j:j + n])
+        i = j + n
+    words = [w for w in words if w not in ("pathtracer", "kernels", "_3clocals_3e", "cpython")
+             and not w.startswith("make_")]
+    return ".".join(words[-2:]) if words else symbol[:60]
+
+
+def profile(args):
+    with tempfile.TemporaryDirectory() as tmp:
+        data, syms = os.path.join(tmp, "perf.data"), os.path.join(tmp, "syms.json")
+        cmd = ["perf", "record", "-q", "-F", "1999", "-o", data, sys.executable, "-m",
+               "bench.cpu_profile", args.scene, "--child", "--syms", syms, "--seconds",
+               str(args.seconds), "--spp", str(args.spp)]
+        # a fresh kernel cache: a kernel loaded from the disk cache keeps no object code to
+        # read its symbols from, so the child compiles (untimed: rendering starts after)
+        env = dict(os.environ, PT_RENDER_CACHE=os.path.join(tmp, "cache"))
+        env.pop("NUMBA_CACHE_DIR", None)
+        run = subprocess.run(cmd, capture_output=True, text=True, env=env)
+        if run.returncode != 0:
+            sys.exit(f"perf record failed: {run.stderr.strip()[-500:]}")
+        rate = json.loads(run.stdout.strip().splitlines()[-1])
+        ips = subprocess.run(["perf", "script", "-i", data, "-F", "ip"], capture_output=True,
+                             text=True).stdout.split()
+        with open(syms) as f:
+            table = sorted(tuple(r) for r in json.load(f))
+    starts = [r[0] for r in table]
+    counts = collections.Counter()
+    outside = 0
+    for word in ips:
+        try:
+            ip = int(word, 16)
+        except ValueError:
+            continue
+        k = bisect.bisect_right(starts, ip) - 1
+        if k >= 0 and ip < table[k][0] + table[k][1]:
+            counts[short_name(table[k][2])] += 1
+        else:
+            outside += 1
+    inside = sum(counts.values())
+    shares = {name: c / inside for name, c in counts.most_common()}
+    print(f"{args.scene}: {rate['m_paths_per_s']:.3f} M camera paths/s while profiled; "
+          f"{inside} samples in the kernel's code, {outside} outside")
+    for name, s in list(shares.items())[:args.top]:
+        print(f"  {100 * s:5.1f}%  {name}")
+    if args.json:
+        from bench.common import machine
+        with open(args.json, "w") as f:
+            json.dump({"command": " ".join(["python -m bench.cpu_profile"] + sys.argv[1:]),
+                       "machine": machine(), "date": time.strftime("%Y-%m-%d %H:%M UTC",
+                                                                   time.gmtime()),
+                       "scene": args.scene, "spp_per_pass": args.spp, "profiled": rate,
+                       "samples_in_kernel": inside, "samples_outside": outside,
+                       "shares": shares}, f, indent=1)
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scene", choices=list(CONVERGENCE))
+    p.add_argument("--seconds", type=float, default=20.0)
+    p.add_argument("--spp", type=int, default=4, help="samples per pixel per pass")
+    p.add_argument("--top", type=int, default=20)
+    p.add_argument("--json")
+    p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--syms", help=argparse.SUPPRESS)
+    args = p.parse_args(argv)
+    if args.child:
+        child(args)
+    else:
+        profile(args)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
