@@ -167,3 +167,29 @@ def test_sweep_benchmark_runs_api_and_cli(tmp_path):
     assert 0 <= api["overhead_median_s"] < api["median_s"]
     cli = run_cli("cpu", 3, 2, 16, 12)
     assert len(cli["walls_s"]) == 3 and cli["render_median_s"] >= 0   # (printed to 0.01 s)
+
+
+def test_cpu_profile_names_and_symbol_table():
+    """bench.cpu_profile: the kernel's compiled functions are found with their addresses
+    (from a fresh compile's object code), and their mangled names read back short."""
+    import json
+    import os
+    import shutil
+    import tempfile
+    from bench.cpu_profile import short_name
+    assert short_name("_ZN10pathtracer7kernels8traverse11closest_hitB3v78B52c8tJT") == \
+        "traverse.closest_hit"
+    assert short_name("_ZN10pathtracer7kernels10integrator12make_kernels12_3clocals_3e13"
+                      "render_sampleB3v62") == "integrator.render_sample"
+    if shutil.which("nm") is None:
+        pytest.skip("needs nm (binutils)")
+    with tempfile.TemporaryDirectory() as tmp:
+        syms = os.path.join(tmp, "syms.json")
+        env = dict(os.environ, PT_RENDER_CACHE=os.path.join(tmp, "cache"))
+        env.pop("NUMBA_CACHE_DIR", None)
+        r = subprocess.run([sys.executable, "-m", "bench.cpu_profile", "cornell-box", "--child",
+                            "--syms", syms, "--seconds", "0.1", "--spp", "1"], cwd=ROOT,
+                           env=env, capture_output=True, text=True, timeout=600)
+        assert r.returncode == 0, r.stderr[-2000:]
+        names = {short_name(row[2]) for row in json.load(open(syms))}
+    assert {"integrator.render_sample", "wide.closest_hit_wide"} <= names, sorted(names)
