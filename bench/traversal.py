@@ -1,0 +1,105 @@
+"""Closest-hit and any-hit rays/s of the binary and the CPU's four-wide BVH, on one scene:
+
+    python -m bench.traversal bunny-studio --rays 400000 --json out.json
+
+Rays start on the scene's triangles (a uniform triangle, its centroid) in uniformly random
+directions, the triangle they leave skipped: rays as a path's bounce and shadow rays see
+the mesh, not camera rays. Both trees trace the same rays on all threads; the hit triangles
+are checked equal. Median of ``--repeats`` after a warm-up, compile excluded.
+"""
+import argparse
+import json
+import sys
+import time
+
+import numpy as np
+from numba import njit, prange
+
+from bench.scenes import CONVERGENCE, convergence_desc
+from pathtracer.accel.wide import WIDE_STACK_SIZE, widen_bvh
+from pathtracer.kernels.constants import INF
+from pathtracer.kernels.traverse import any_hit, closest_hit
+from pathtracer.kernels.wide import any_hit_wide, closest_hit_wide
+
+
+def _tracers(closest, occluded):
+    @njit(parallel=True)
+    def trace(o, d, skip, tri_v, box, child, t_out, tri_out, any_out):
+        for i in prange(o.shape[0]):
+            stack = np.empty(WIDE_STACK_SIZE, np.int32)
+            oi = (o[i, 0], o[i, 1], o[i, 2])
+            di = (d[i, 0], d[i, 1], d[i, 2])
+            t, tri, b1, b2 = closest(oi, di, INF, skip[i], tri_v, box, child, stack)
+            t_out[i] = t
+            tri_out[i] = tri
+
+    @njit(parallel=True)
+    def shadow(o, d, skip, tri_v, box, child, t_out, tri_out, any_out):
+        for i in prange(o.shape[0]):
+            stack = np.empty(WIDE_STACK_SIZE, np.int32)
+            oi = (o[i, 0], o[i, 1], o[i, 2])
+            di = (d[i, 0], d[i, 1], d[i, 2])
+            any_out[i] = occluded(oi, di, INF, skip[i], -1, tri_v, box, child, stack)
+    return trace, shadow
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scene", choices=list(CONVERGENCE))
+    p.add_argument("--rays", type=int, default=400_000)
+    p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--json")
+    args = p.parse_args(argv)
+    from pathtracer.scene import compile_scene
+    from bench.common import machine, now, versions
+    scene = compile_scene(convergence_desc(args.scene))
+    a = scene.arrays
+    n_tri = scene.n_triangles
+    rng = np.random.default_rng(1)
+    skip = rng.integers(0, n_tri, args.rays).astype(np.int32)
+    tv = a.tri_v[skip]
+    origins = (tv[:, 0:3] + tv[:, 3:6] / 3 + tv[:, 6:9] / 3).astype(np.float32)
+    dirs = rng.normal(size=(args.rays, 3))
+    dirs = (dirs / np.linalg.norm(dirs, axis=1, keepdims=True)).astype(np.float32)
+    t0 = time.perf_counter()
+    wide, wchild = widen_bvh(a.tri_v, a.bvh_box, a.bvh_child)
+    widen_s = time.perf_counter() - t0
+    trees = {"binary": (_tracers(closest_hit, any_hit), a.bvh_box, a.bvh_child),
+             "four-wide": (_tracers(closest_hit_wide, any_hit_wide), wide, wchild)}
+    out = {}
+    hits = {}
+    for name, ((trace, shadow), box, child) in trees.items():
+        t = np.empty(args.rays, np.float32)
+        tri = np.empty(args.rays, np.int32)
+        hit = np.empty(args.rays, np.bool_)
+        rec = {}
+        for label, fn in (("closest_hit", trace), ("any_hit", shadow)):
+            fn(origins, dirs, skip, a.tri_v, box, child, t, tri, hit)      # compile, warm up
+            times = []
+            for _ in range(args.repeats):
+                s = time.perf_counter()
+                fn(origins, dirs, skip, a.tri_v, box, child, t, tri, hit)
+                times.append(time.perf_counter() - s)
+            rec[label + "_rays_per_s"] = args.rays / float(np.median(times))
+        hits[name] = (tri.copy(), hit.copy())
+        out[name] = rec
+        print(f"{args.scene} {name}: closest hit {rec['closest_hit_rays_per_s'] / 1e6:.2f} M "
+              f"rays/s, any hit {rec['any_hit_rays_per_s'] / 1e6:.2f} M rays/s")
+    same = bool((hits["binary"][0] == hits["four-wide"][0]).all()
+                and (hits["binary"][1] == hits["four-wide"][1]).all())
+    print(f"same hits: {same}; hit fraction {float((hits['binary'][0] >= 0).mean()):.3f}; "
+          f"collapse {widen_s * 1e3:.1f} ms (first call includes its compile)")
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"command": "python -m bench.traversal " + " ".join(sys.argv[1:]),
+                       "machine": machine(), "date": now(), "versions": versions(),
+                       "scene": args.scene, "rays": args.rays, "triangles": int(n_tri),
+                       "binary_nodes": int(len(a.bvh_box)), "wide_nodes": int(len(wchild)),
+                       "wide_bytes": int(wide.nbytes + wchild.nbytes),
+                       "binary_bytes": int(a.bvh_box.nbytes + a.bvh_child.nbytes),
+                       "same_hits": same, "results": out}, f, indent=1)
+    return 0 if same else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
