@@ -25,8 +25,10 @@ as the binary tree's), so the kernels' arguments and types do not change:
   which shading reads), packed in the groups starting at row ``index``; 0: an inner node
   whose rows start at ``index``; -1: no child (its box is NaN, which no ray enters).
 
-The GPU keeps the binary tree: there the two-box node suits a lane per path (measured in
-docs/benchmarks.md); only the CPU backend builds these arrays.
+Only the CPU backend builds these arrays; the GPU keeps the binary tree, whose traversal
+was tuned there (vector loads of its nodes, docs/benchmarks.md). This code is plain Numba
+and LLVM IR that the CUDA target could compile too; whether the wide tree also pays on the
+GPU is not measured yet.
 """
 import math
 
