@@ -65,7 +65,8 @@ def trace_all_wide(origins, dirs, tri_v, wide, wchild, skips, skips_b):
 
 
 @njit(cache=True)
-def brute_force(origins, dirs, tri_v, n_tri, skips):
+def brute_force(origins, dirs, tri_v, n_tri, skips, skips_b):
+    """The nearest hit of each ray over all triangles but skips[k] and skips_b[k]."""
     n = origins.shape[0]
     out_t = np.empty(n, np.float32)
     out_i = np.empty(n, np.int32)
@@ -75,7 +76,7 @@ def brute_force(origins, dirs, tri_v, n_tri, skips):
         best = INF
         best_i = -1
         for i in range(n_tri):
-            if i == skips[k]:
+            if i == skips[k] or i == skips_b[k]:
                 continue
             t, b1, b2 = ray_triangle(o, d, tri_v, i, best)
             if t < best:
@@ -95,7 +96,8 @@ def check_against_brute_force(pos, origins, dirs, skips=None, **options):
     origins = origins.astype(np.float32)
     dirs = dirs.astype(np.float32)
     t, i, a = trace_all(origins, dirs, tri_v, bvh.box, bvh.child, skips)
-    tb, ib = brute_force(origins, dirs, tri_v, len(pos), skips)
+    tb, ib = brute_force(origins, dirs, tri_v, len(pos), skips,
+                         np.full(len(origins), -1, np.int32))
     # Same distance exactly (same arithmetic); the triangle may differ only at equal t
     # (a ray through a shared edge or vertex hits both triangles at the same t).
     assert np.array_equal(t, tb)
@@ -115,32 +117,9 @@ def check_against_brute_force(pos, origins, dirs, skips=None, **options):
         o, d = tuple(origins[k]), tuple(dirs[k])
         assert ray_triangle(o, d, tri_v, iw[k], INF) == (tw[k], bw[k, 0], bw[k, 1])
     _, _, _, aw2 = trace_all_wide(origins, dirs, tri_v, wide, wchild, skips, ib)
-    _, ib2 = brute_force_two(origins, dirs, tri_v, len(pos), skips, ib)
+    _, ib2 = brute_force(origins, dirs, tri_v, len(pos), skips, ib)
     assert np.array_equal(aw2, ib2 >= 0)
     return bvh, t, i
-
-
-@njit(cache=True)
-def brute_force_two(origins, dirs, tri_v, n_tri, skips, skips_b):
-    """brute_force with a second skipped triangle per ray."""
-    n = origins.shape[0]
-    out_t = np.empty(n, np.float32)
-    out_i = np.empty(n, np.int32)
-    for k in range(n):
-        o = (origins[k, 0], origins[k, 1], origins[k, 2])
-        d = (dirs[k, 0], dirs[k, 1], dirs[k, 2])
-        best = INF
-        best_i = -1
-        for i in range(n_tri):
-            if i == skips[k] or i == skips_b[k]:
-                continue
-            t, b1, b2 = ray_triangle(o, d, tri_v, i, best)
-            if t < best:
-                best = t
-                best_i = i
-        out_t[k] = best
-        out_i[k] = best_i
-    return out_t, out_i
 
 
 def check_wide_structure(bvh, wide, wchild, tri_v, n):

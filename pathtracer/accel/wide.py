@@ -79,6 +79,18 @@ def _small_subtrees(child, limit):
 
 
 @njit(cache=jit_cache())
+def _take_child(box, child, b, s, sub_first, sub_count, kid_box, kid_index, kid_count, k):
+    """Child s of binary node b into slot k of the wide node being made: its box, and its
+    (index, count), an inner node of a small subtree turned into a leaf over its range."""
+    kid_box[k, :] = box[b, s * BOX_STRIDE:(s + 1) * BOX_STRIDE]
+    kid_index[k] = child[b, s * CHILD_STRIDE + CHILD_INDEX]
+    kid_count[k] = child[b, s * CHILD_STRIDE + CHILD_COUNT]
+    if kid_count[k] == 0 and sub_count[kid_index[k]] > 0:
+        kid_count[k] = sub_count[kid_index[k]]
+        kid_index[k] = sub_first[kid_index[k]]
+
+
+@njit(cache=jit_cache())
 def _collapse(box, child, merge):
     n = box.shape[0]
     sub_first, sub_count = _small_subtrees(child, merge)
@@ -106,12 +118,8 @@ def _collapse(box, child, merge):
         k = 0
         for s in range(2):
             if child[b, s * CHILD_STRIDE + CHILD_COUNT] >= 0:
-                kid_box[k, :] = box[b, s * BOX_STRIDE:(s + 1) * BOX_STRIDE]
-                kid_index[k] = child[b, s * CHILD_STRIDE + CHILD_INDEX]
-                kid_count[k] = child[b, s * CHILD_STRIDE + CHILD_COUNT]
-                if kid_count[k] == 0 and sub_count[kid_index[k]] > 0:
-                    kid_count[k] = sub_count[kid_index[k]]
-                    kid_index[k] = sub_first[kid_index[k]]
+                _take_child(box, child, b, s, sub_first, sub_count, kid_box, kid_index,
+                            kid_count, k)
                 k += 1
         while k < LANES:
             best = -1
@@ -133,12 +141,8 @@ def _collapse(box, child, merge):
             for s in range(2):
                 if child[inner, s * CHILD_STRIDE + CHILD_COUNT] >= 0:
                     j = slot if placed == 0 else k
-                    kid_box[j, :] = box[inner, s * BOX_STRIDE:(s + 1) * BOX_STRIDE]
-                    kid_index[j] = child[inner, s * CHILD_STRIDE + CHILD_INDEX]
-                    kid_count[j] = child[inner, s * CHILD_STRIDE + CHILD_COUNT]
-                    if kid_count[j] == 0 and sub_count[kid_index[j]] > 0:
-                        kid_count[j] = sub_count[kid_index[j]]
-                        kid_index[j] = sub_first[kid_index[j]]
+                    _take_child(box, child, inner, s, sub_first, sub_count, kid_box,
+                                kid_index, kid_count, j)
                     if placed == 1:
                         k += 1
                     placed += 1
