@@ -31,7 +31,8 @@ ROOT = os.path.dirname(HERE)
 # scene -> (resolution, spp per pass) for throughput, per backend
 THROUGHPUT = {
     "cpu": {"cornell-box": ((256, 256), 4), "bunny-studio": ((256, 192), 4),
-            "sun": ((256, 192), 4), "textured": ((256, 192), 4)},
+            "sun": ((256, 192), 4), "textured": ((256, 192), 4),
+            "bunny-mesh": ((128, 128), 4), "dragon-1.6m": ((128, 128), 4)},
     "cuda": {"cornell-box": ((1024, 1024), 64), "bunny-studio": ((1024, 768), 16),
              "sun": ((1024, 768), 16), "textured": ((1024, 768), 16),
              "bunny-mesh": ((1024, 1024), 16), "dragon-1.6m": ((1024, 1024), 16)},
