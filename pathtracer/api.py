@@ -426,9 +426,9 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
     "python". ``sampler``: "sobol" or "independent" (default: the scene's). ``seed``,
     ``max_bounces``: override the scene's. ``adaptive``: a target relMSE of the image
     for adaptive sampling (see progressive.render). ``aovs``: also render the albedo and
-    normal images; ``denoise``: denoise the image with Open Image Denoise (``raw`` keeps the noisy one). ``callback(progress)``
-    is called after every pass with a :class:`Progress`; returning False stops the render
-    (the result holds the passes done). Ctrl-C stops it too. Returns a :class:`Result`.
+    normal images; ``denoise``: denoise the image with Open Image Denoise (``raw`` keeps
+    the noisy one). ``callback(progress)`` is called after every pass with a
+    :class:`Progress`; returning False stops the render (the result holds the passes done). Ctrl-C stops it too. Returns a :class:`Result`.
 
     Several devices: ``devices`` (a list of CUDA device numbers, or "all") renders every
     pass on those GPUs at once; ``ray`` (an address, or "local" for a Ray runtime on this

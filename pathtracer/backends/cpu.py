@@ -11,10 +11,11 @@ from ..accel.wide import WIDE_STACK_SIZE, widen_bvh
 from ..kernels.layout import AOV_WIDTH
 from ..kernels.integrator import make_aov_pixel, make_render_pixel
 
+
 def cpu_arrays(arrays, previous=None):
     """The CPU kernels' arrays: the scene's, with the four-wide BVH (kernels.wide) in the
     ``bvh_box`` and ``bvh_child`` slots (same array types: the kernels' signature does not
-    change), collapsed from the binary tree in 2 ms for the 69k-triangle bunny. ``previous``
+    change), collapsed from the binary tree in 3 ms for the 69k-triangle bunny. ``previous``
     ((binary arrays, wide arrays) of an earlier call): reused when the geometry is the same
     arrays (an API re-render that changed a material or the camera). Returns (CPU arrays,
     the pair to pass as ``previous`` next time)."""
