@@ -66,6 +66,17 @@ def _describe(name, resolution):
     return desc
 
 
+def ptx_instructions(ptx):
+    """The number of instructions in PTX text (the kernel's size: the HDRI scenes' warps
+    wait on instruction fetch, docs/benchmarks.md)."""
+    n = 0
+    for line in ptx.splitlines():
+        t = line.strip()
+        if t and (t[0].isalpha() or t[0] == "@"):   # (labels end in ":", directives start with ".")
+            n += 1
+    return n
+
+
 def worker(args):
     """Runs with the tree under test first on sys.path (bench.* is imported before it)."""
     import bench.scenes  # noqa: F401  (this tree's scene descriptions, imported first)
@@ -89,6 +100,9 @@ def worker(args):
     mb, rr = scene.max_bounces, scene.rr_depth
     out = {"tree": args.tree, "scene": args.scene, "backend": args.backend,
            "resolution": res, "spp": args.spp, "compile_s": compile_s}
+    if args.backend == "cuda" and args.mode == "time":
+        out.update(ptx_instructions=ptx_instructions(backend.ptx()),
+                   registers=backend.registers())
     if args.mode == "image":
         img, _ = backend.render_pass(0, args.spp, 7, mb, rr)
         np.save(args.save, np.array(img, np.float32))
@@ -151,10 +165,15 @@ def throughput(args):
                 record["results"].append(got)
         medians = {t: statistics.median(v) for t, v in per_tree.items()}
         a, b = (medians[t] for t in args.trees)
+        size = {r["tree"]: r["ptx_instructions"] for r in record["results"]
+                if r["scene"] == name and "ptx_instructions" in r}
         print(f"{name:14s} {args.backend:5s} " + "  ".join(
-            f"{t}: {medians[t] / 1e6:8.3f} M paths/s" for t in args.trees) +
+            f"{t}: {medians[t] / 1e6:8.3f} M paths/s" +
+            (f" ({size[t]} PTX instructions)" if t in size else "") for t in args.trees) +
             f"   ratio {b / a:.3f}", flush=True)
         record.setdefault("summary", {})[name] = {"paths_per_s": medians, "ratio": b / a}
+        if size:
+            record["summary"][name]["ptx_instructions"] = size
     if args.json:
         with open(args.json, "w") as f:
             json.dump(record, f, indent=1)

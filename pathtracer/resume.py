@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .film import Film
+from .kernels.principled import Lobes
 
 FORMAT_VERSION = 1
 SUFFIX = ".state.npz"
@@ -36,9 +37,12 @@ def scene_hash(compiled, max_bounces, rr_depth):
     """A hash of everything that decides a pixel's samples except the seed and the
     sample index: the compiled arrays (geometry, BVH, materials, textures, lights,
     camera), the feature set the kernel is specialised on (the sampler among them), the
-    image size and the path-length settings."""
+    image size and the path-length settings. (The principled lobes' flags are left out of
+    the feature set: they follow from the material arrays, and a state saved before they
+    existed still resumes.)"""
     h = hashlib.blake2b(digest_size=16)
-    h.update(repr((tuple(compiled.features), compiled.width, compiled.height,
+    features = tuple(v for k, v in compiled.features._asdict().items() if k not in Lobes._fields)
+    h.update(repr((features, compiled.width, compiled.height,
                    int(max_bounces), int(rr_depth))).encode())
     for name, a in zip(compiled.arrays._fields, compiled.arrays):
         a = np.ascontiguousarray(a)

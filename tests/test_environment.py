@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from numba import njit
 
-from pathtracer.kernels.envmap import env_eval, env_pdf, env_sample, env_uv
+from pathtracer.kernels.envmap import (env_eval, env_eval_uv, env_lookup, env_pdf, env_sample,
+                                      env_sample_uv, env_uv)
 from pathtracer.kernels.rng import path_key, sample_1d
 from pathtracer.scene import load_scene
 from pathtracer.kernels.envmap import environment_tables
@@ -197,3 +198,39 @@ def test_sampling_density_follows_the_bilinear_radiance():
     q = _radiance_over_pdf(img32, pdf, info(-75.0), 2_000_000)
     assert len(q) > 1_000_000
     assert q.max() / q.min() < 1.03, q.max() / q.min()
+
+
+@njit(cache=True)
+def _lookups(img, marg, cond, pdf, inf, n):
+    """For n sampled directions: |env_eval_uv at the sample's (u, v) - env_eval(d)| over
+    the radiance, and whether env_lookup gave env_eval's and env_pdf's numbers exactly
+    (with and without the pdf)."""
+    rel = np.zeros(n)
+    same = 0
+    for i in range(n):
+        k = path_key(i, 5, 91)
+        d, p, u, v = env_sample_uv(marg, cond, pdf, inf, sample_1d(k, 0), sample_1d(k, 1))
+        a = env_eval(img, inf, d)
+        b = env_eval_uv(img, u, v)
+        rel[i] = max(abs(a[0] - b[0]), abs(a[1] - b[1]), abs(a[2] - b[2])) / max(
+            a[0], a[1], a[2], 1e-30)
+        le, p1 = env_lookup(img, pdf, inf, d, True)
+        le0, p0 = env_lookup(img, pdf, inf, d, False)
+        if le == a and le0 == a and p1 == env_pdf(pdf, inf, d) and p0 == 0.0:
+            same += 1
+    return rel, same
+
+
+@needs_shared
+def test_lookups_at_the_sampled_coordinates():
+    """Next-event estimation looks the sky's radiance up at the sample's own (u, v)
+    (env_eval_uv), escaped rays take radiance and density from one mapping (env_lookup):
+    the former agrees with env_eval of the sampled direction up to the (u, v) round trip's
+    rounding, the latter gives env_eval's and env_pdf's numbers exactly."""
+    img, _ = read_image(os.path.join(SHARED, "assets", "hdri", "rooitou_park_1k.hdr"))
+    img32, marg, cond, pdf = environment_tables(img)
+    n = 200_000
+    rel, same = _lookups(img32, marg, cond, pdf, info(100.0), n)
+    assert same == n
+    assert np.median(rel) < 1e-5 and np.quantile(rel, 0.999) < 1e-3, (
+        np.median(rel), np.quantile(rel, 0.999), rel.max())

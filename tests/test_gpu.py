@@ -77,7 +77,8 @@ def _full_feature_scene(tmp_path):
         "render": {"maxBounces": 6, "rrDepth": 2},
         "materials": [
             {"name": "floor", "albedo": {"texture": "a.png", "wrap": ["mirror", "clamp"]},
-             "roughness": 0.4, "normalMap": "n.png", "anisotropic": 0.5},
+             "roughness": 0.4, "normalMap": "n.png", "anisotropic": 0.5,
+             "specularTint": 0.5, "subsurface": 0.3},
             {"name": "glass", "transmission": 1, "roughness": 0.1, "eta": 1.5,
              "clearcoat": 0.5, "sheen": 0.3},
             {"name": "lamp", "type": "diffuse", "albedo": 0, "emission": 4}],

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 from numba import njit
 
-from pathtracer.kernels.principled import principled_eval, principled_sample
+from pathtracer.kernels.layout import P_FIELDS
+from pathtracer.kernels.principled import (ALL_LOBES, Lobes, make_principled, principled_eval,
+                                           principled_sample)
 from pathtracer.kernels.rng import path_key, sample_1d
 from tests.helpers import chi2_test, principled_params as params
 
@@ -172,3 +174,73 @@ def test_energy_conserving_corners(p):
         wo = direction(cz)
         m, se = _flux_albedo(p, wo, 100_000, 3)
         assert np.all(m <= 1.0 + 4 * se + 1e-4), (p, cz, m, se)
+
+
+def _variant_kernel(lobes):
+    """eval and sample of the BSDF compiled with ``lobes`` over arrays of parameters
+    (n, 14), directions wo and wi (n, 3) and uniforms (n, 3): (n, 4) eval rows (f, pdf)
+    and (n, 7) sample rows (wi, weight, pdf)."""
+    eval_l, sample_l = make_principled(lobes)
+
+    @njit(error_model="numpy")
+    def run(P, WO, WI, U):
+        n = P.shape[0]
+        ev = np.zeros((n, 4), np.float32)
+        sm = np.zeros((n, 7), np.float32)
+        for i in range(n):
+            q = P[i]
+            p = (q[0], q[1], q[2], q[3], q[4], q[5], q[6], q[7], q[8], q[9], q[10], q[11],
+                 q[12], q[13])
+            wo = (WO[i, 0], WO[i, 1], WO[i, 2])
+            wi = (WI[i, 0], WI[i, 1], WI[i, 2])
+            f, pdf = eval_l(p, wo, wi)
+            ev[i, 0], ev[i, 1], ev[i, 2], ev[i, 3] = f[0], f[1], f[2], pdf
+            d, w, pdf = sample_l(p, wo, U[i, 0], U[i, 1], U[i, 2])
+            sm[i, 0], sm[i, 1], sm[i, 2] = d[0], d[1], d[2]
+            sm[i, 3], sm[i, 4], sm[i, 5], sm[i, 6] = w[0], w[1], w[2], pdf
+        return ev, sm
+    return run
+
+
+# Lobes field: the parameter values of materials without it
+LOBE_OFF = {"dielectric": {"metallic": 1.0},
+            "clearcoat": {"clearcoat": 0.0, "clearcoat_gloss": 0.0},
+            "sheen": {"sheen": 0.0, "sheen_tint": 0.0}, "transmission": {"transmission": 0.0},
+            "flatness": {"flatness": 0.0}, "spec_tint": {"spec_tint": 0.0},
+            "anisotropic": {"anisotropic": 0.0}}
+# the cases: the lobes compiled in (every lobe off but the dielectric part; that and one
+# more; all but the dielectric part: metals)
+LOBE_CASES = ([("dielectric",)] + [("dielectric", f) for f in list(LOBE_OFF)[1:]] +
+              [tuple(list(LOBE_OFF)[1:])])
+
+
+@pytest.mark.parametrize("on", LOBE_CASES, ids=["-".join(c) for c in LOBE_CASES])
+def test_lobes_compiled_out_change_nothing(on):
+    """The BSDF specialised for materials without some lobes (kernels compile only the
+    lobes a scene uses) gives bit for bit the full BSDF's values and samples for such
+    materials."""
+    rng = np.random.default_rng(7)
+    n = 4000
+    P = rng.uniform(0, 1, (n, len(P_FIELDS))).astype(np.float32)
+    P[:, P_FIELDS.index("eta")] = rng.choice([1.0, 1.33, 1.5, 2.4], n)
+    for k in ("metallic", "transmission", "roughness"):   # the corners too
+        P[rng.uniform(size=n) < 0.2, P_FIELDS.index(k)] = rng.choice([0.0, 1.0])
+    lobes = Lobes(*(field in on for field in Lobes._fields))
+    for field, values in LOBE_OFF.items():
+        if field not in on:
+            for name, value in values.items():
+                P[:, P_FIELDS.index(name)] = value
+    # (as the kernel's materials: a transmissive one never has eta 1, see surface.principled_at)
+    eta = P[:, P_FIELDS.index("eta")]
+    eta[(eta == 1.0) & (P[:, P_FIELDS.index("transmission")] > 0)] = 1.5
+    WO = rng.normal(size=(n, 3))
+    WI = rng.normal(size=(n, 3))
+    WO = (WO / np.linalg.norm(WO, axis=1)[:, None]).astype(np.float32)
+    WI = (WI / np.linalg.norm(WI, axis=1)[:, None]).astype(np.float32)
+    WO[:n // 2, 2] = np.abs(WO[:n // 2, 2])     # mostly from outside, where all lobes live
+    U = rng.uniform(0, 1, (n, 3)).astype(np.float32)
+    ev_full, sm_full = _variant_kernel(ALL_LOBES)(P, WO, WI, U)
+    ev, sm = _variant_kernel(lobes)(P, WO, WI, U)
+    assert np.array_equal(ev, ev_full, equal_nan=True)
+    assert np.array_equal(sm, sm_full, equal_nan=True)
+    assert (ev_full[:, 3] > 0).sum() > n // 4 and (sm_full[:, 6] > 0).sum() > n // 4

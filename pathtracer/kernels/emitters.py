@@ -15,18 +15,20 @@ the irradiance term), ``is_delta`` whether MIS against BSDF sampling is impossib
 lights) and ``light_tri`` the light's triangle, which the shadow ray must not hit (-1 when
 none). ``pdf_light`` = 0 means no sample.
 
-The environment's radiance is left out of the record (zero): :func:`environment_radiance`
-evaluates it once the shadow ray found the sky visible, because that lookup (two inverse
-trigonometric functions and a bilinear filter) for every occluded sample cost 12% on an
-H100 in the bunny-studio scene. The other kinds' radiance is a table lookup, cheaper done at
-once than carrying what it needs (material, texture coordinates) past the shadow ray.
+The environment's radiance is left out of the record: its ``radiance`` holds the sample's
+map coordinates (u, v, 0) instead, and :func:`environment_radiance` looks the radiance up
+there once the shadow ray found the sky visible, because that lookup for every occluded
+sample cost 12% on an H100 in the bunny-studio scene; at (u, v) it needs no inverse
+trigonometry (as Mitsuba's envmap evaluates its sample). The other kinds' radiance is a
+table lookup, cheaper done at once than carrying what it needs (material, texture
+coordinates) past the shadow ray.
 """
 import functools
 from typing import NamedTuple
 
 from .constants import INF, ONE, ONE_MINUS_EPS, SHADOW_SHORTEN, ZERO
 from .device import device, step_marker
-from .envmap import env_eval, env_pdf, env_sample
+from .envmap import env_eval_uv, env_lookup, env_sample_uv
 from .layout import ENV_P_SELECT, PL_INTENSITY, PL_POSITION, point_light_index, specialise
 from .lights import direction_to, sample_discrete, sample_triangle_point
 from .materials import emits
@@ -72,10 +74,11 @@ def make_emitters(features, target="cpu"):
 
     @step
     def sample_environment(env_marg, env_cond, env_pdf_arr, env_info, u1, u2):
-        wi, pdf_dir = env_sample(env_marg, env_cond, env_pdf_arr, env_info, u1, u2)
+        wi, pdf_dir, u, v = env_sample_uv(env_marg, env_cond, env_pdf_arr, env_info, u1, u2)
         if not (pdf_dir > ZERO):
             return wi, INF, NO_RADIANCE, ZERO, False, -1
-        return wi, INF, NO_RADIANCE, env_info[ENV_P_SELECT] * pdf_dir, False, -1
+        # (the radiance slot carries the map coordinates: see environment_radiance)
+        return wi, INF, (u, v, ZERO), env_info[ENV_P_SELECT] * pdf_dir, False, -1
 
     @step
     def sample_triangle_light(tri_v, tri_mat, tri_uv, tri_light_pdf, mat, mat_tex, tex_data,
@@ -137,11 +140,12 @@ def make_emitters(features, target="cpu"):
 
     @step
     def environment_radiance(env_img, env_info, wi, le, is_delta, light_tri):
-        """The record's radiance, with the environment's looked up now (see the module's
-        docstring): a sample of neither a triangle nor a point light is the environment's."""
+        """The record's radiance, with the environment's looked up now at the (u, v) its
+        record carries (see the module's docstring): a sample of neither a triangle nor a
+        point light is the environment's."""
         if ENV_MAP:
             if light_tri < 0 and not is_delta:
-                return env_eval(env_img, env_info, wi)
+                return env_eval_uv(env_img, le[0], le[1])
         return le
 
     @step
@@ -166,10 +170,9 @@ def make_emitters(features, target="cpu"):
         """(radiance, MIS weight) of the environment seen by a ray leaving the scene along
         d. A constant environment is not sampled by next-event estimation: weight 1."""
         if ENV_MAP:
-            pdf_light = ZERO
-            if pdf_prev > ZERO:
-                pdf_light = env_info[ENV_P_SELECT] * env_pdf(env_pdf_arr, env_info, d)
-            return env_eval(env_img, env_info, d), mis_weight_hit(pdf_prev, pdf_light)
+            # (the radiance and, for MIS, the density from one mapping of d to the map)
+            le, pdf_dir = env_lookup(env_img, env_pdf_arr, env_info, d, pdf_prev > ZERO)
+            return le, mis_weight_hit(pdf_prev, env_info[ENV_P_SELECT] * pdf_dir)
         if ENVIRONMENT:
             return (env[0], env[1], env[2]), ONE
         return NO_RADIANCE, ZERO

@@ -73,17 +73,42 @@ def env_cell(w, h, u, v):
 
 
 @device
+def radiance_in_cell(env_img, i0, i1, j0, j1, fx, fy):
+    """The bilinear blend of the four texels of an env_cell."""
+    return bilinear_blend(
+        (env_img[j0, i0, 0], env_img[j0, i0, 1], env_img[j0, i0, 2]),
+        (env_img[j0, i1, 0], env_img[j0, i1, 1], env_img[j0, i1, 2]),
+        (env_img[j1, i0, 0], env_img[j1, i0, 1], env_img[j1, i0, 2]),
+        (env_img[j1, i1, 0], env_img[j1, i1, 1], env_img[j1, i1, 2]), fx, fy)
+
+
+@device
+def density_in_cell(env_pdf_arr, i0, i1, j0, j1, fx, fy, sin_t):
+    """The solid-angle density at a point of an env_cell whose direction has sin theta
+    sin_t > 0: the bilinear blend of the texel-centre densities over the Jacobian."""
+    a = env_pdf_arr[j0, i0] + fx * (env_pdf_arr[j0, i1] - env_pdf_arr[j0, i0])
+    b = env_pdf_arr[j1, i0] + fx * (env_pdf_arr[j1, i1] - env_pdf_arr[j1, i0])
+    return (a + fy * (b - a)) / (TWO_PI_SQ * sin_t)
+
+
+@device
 def env_eval(env_img, env_info, d):
     """Radiance arriving from direction d (bilinear)."""
     h = env_img.shape[0]
     w = env_img.shape[1]
     u, v, _ = env_uv(env_info, d)
     i0, i1, j0, j1, fx, fy = env_cell(w, h, u, v)
-    return bilinear_blend(
-        (env_img[j0, i0, 0], env_img[j0, i0, 1], env_img[j0, i0, 2]),
-        (env_img[j0, i1, 0], env_img[j0, i1, 1], env_img[j0, i1, 2]),
-        (env_img[j1, i0, 0], env_img[j1, i0, 1], env_img[j1, i0, 2]),
-        (env_img[j1, i1, 0], env_img[j1, i1, 1], env_img[j1, i1, 2]), fx, fy)
+    return radiance_in_cell(env_img, i0, i1, j0, j1, fx, fy)
+
+
+@device
+def env_eval_uv(env_img, u, v):
+    """Radiance at map coordinates (u, v): env_eval where the direction's coordinates
+    are known (an env_sample_uv sample), without the inverse trigonometry."""
+    h = env_img.shape[0]
+    w = env_img.shape[1]
+    i0, i1, j0, j1, fx, fy = env_cell(w, h, u, v)
+    return radiance_in_cell(env_img, i0, i1, j0, j1, fx, fy)
 
 
 @device
@@ -97,9 +122,23 @@ def env_pdf(env_pdf_arr, env_info, d):
     if sin_t <= ZERO:
         return ZERO
     i0, i1, j0, j1, fx, fy = env_cell(w, h, u, v)
-    a = env_pdf_arr[j0, i0] + fx * (env_pdf_arr[j0, i1] - env_pdf_arr[j0, i0])
-    b = env_pdf_arr[j1, i0] + fx * (env_pdf_arr[j1, i1] - env_pdf_arr[j1, i0])
-    return (a + fy * (b - a)) / (TWO_PI_SQ * sin_t)
+    return density_in_cell(env_pdf_arr, i0, i1, j0, j1, fx, fy, sin_t)
+
+
+@device
+def env_lookup(env_img, env_pdf_arr, env_info, d, with_pdf):
+    """(env_eval, env_pdf if with_pdf else 0) of direction d from one mapping to (u, v)
+    and one cell: what a ray that escaped needs (the same numbers as the two calls)."""
+    h = env_img.shape[0]
+    w = env_img.shape[1]
+    u, v, y = env_uv(env_info, d)
+    i0, i1, j0, j1, fx, fy = env_cell(w, h, u, v)
+    pdf = ZERO
+    if with_pdf:
+        sin_t = math.sqrt(max(ONE - y * y, ZERO))
+        if sin_t > ZERO:
+            pdf = density_in_cell(env_pdf_arr, i0, i1, j0, j1, fx, fy, sin_t)
+    return radiance_in_cell(env_img, i0, i1, j0, j1, fx, fy), pdf
 
 
 @device
@@ -120,6 +159,14 @@ def _lerp_row(env_cond, j0, j1, t, i):
 @device
 def env_sample(env_marg, env_cond, env_pdf_arr, env_info, u1, u2):
     """(direction, solid-angle pdf); pdf = 0 means no sample."""
+    d, pdf, _, _ = env_sample_uv(env_marg, env_cond, env_pdf_arr, env_info, u1, u2)
+    return d, pdf
+
+
+@device
+def env_sample_uv(env_marg, env_cond, env_pdf_arr, env_info, u1, u2):
+    """(direction, solid-angle pdf, u, v): env_sample and the direction's map
+    coordinates, for env_eval_uv."""
     h = env_pdf_arr.shape[0]
     w = env_pdf_arr.shape[1]
     # the row cell k lies between texel rows k - 1 and k (clamped: half cells at the ends)
@@ -166,8 +213,8 @@ def env_sample(env_marg, env_cond, env_pdf_arr, env_info, u1, u2):
     sn = env_info[ENV_SIN_ROT]
     d = (xm * c + zm * sn, cos_t, -xm * sn + zm * c)
     if sin_t <= ZERO:
-        return d, ZERO
-    return d, p_uv / (TWO_PI_SQ * sin_t)
+        return d, ZERO, u, v
+    return d, p_uv / (TWO_PI_SQ * sin_t), u, v
 
 
 # ---- Host side: the tables the functions above read ----------------------------------------

@@ -260,6 +260,17 @@ class Features(NamedTuple):
     sobol: bool = False        # Owen-scrambled Sobol sampler (else independent)
     wrap_modes: bool = False   # a texture that mirrors or clamps (else all repeat)
     mipmaps: bool = False      # a mip-mapped (trilinear) texture: ray cones are traced
+    # The principled parameters some material sets above 0 (or textures): the BSDF's parts
+    # that need them are compiled only then (kernels.principled.Lobes). True by default:
+    # a feature set built without them compiles the whole BSDF. dielectric: some principled
+    # material is not all metal (metallic below 1 or textured).
+    dielectric: bool = True
+    clearcoat: bool = True
+    sheen: bool = True
+    transmission: bool = True
+    flatness: bool = True      # the scene's "subsurface"
+    spec_tint: bool = True
+    anisotropic: bool = True
 
 
 class Specialisation(NamedTuple):
@@ -283,6 +294,7 @@ class Specialisation(NamedTuple):
     sobol: bool            # the Owen-scrambled Sobol sampler
     wrap_modes: bool       # texture wrap modes other than repeat
     mipmaps: bool          # trilinear textures: ray-cone footprints for their lookups
+    lobes: tuple           # kernels.principled.Lobes: the principled BSDF's parts compiled
 
 
 def specialise(features):
@@ -298,7 +310,8 @@ def specialise(features):
         smooth=f.smooth, principled=f.principled, textures=f.textures,
         normal_map=normal_map, tangents=f.tangents, thin_lens=f.thin_lens, fold=fold,
         lean=not f.principled and not fold, sobol=f.sobol,
-        wrap_modes=f.wrap_modes and f.textures, mipmaps=f.mipmaps and f.textures)
+        wrap_modes=f.wrap_modes and f.textures, mipmaps=f.mipmaps and f.textures,
+        lobes=(f.dielectric, f.clearcoat, f.sheen, f.transmission, f.flatness, f.spec_tint, f.anisotropic))
 
 
 class SceneArrays(NamedTuple):

@@ -25,7 +25,9 @@ bsdf * (1 - F(m)) for the sampled microfacet m; inside, reflection F and refract
 The selection probabilities of the diffuse and clearcoat lobes do not depend on m, so the
 pdf below is exactly the density of ``principled_sample``.
 """
+import functools
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -210,221 +212,268 @@ def mac_mic_compatible(m, wo, wi, cos_o, reflection):
 
 
 @device
-def principled_eval(params, wo, wi):
-    """(f(wo, wi) |cos theta_i| as rgb, pdf of principled_sample producing wi)."""
-    base_r = params[P_BASE]
-    base_g = params[P_BASE + 1]
-    base_b = params[P_BASE + 2]
-    roughness = params[P_ROUGHNESS]
-    metallic = params[P_METALLIC]
-    eta = params[P_ETA]
-    spec_tint = params[P_SPEC_TINT]
-    anisotropic = params[P_ANISOTROPIC]
-    sheen = params[P_SHEEN]
-    sheen_tint = params[P_SHEEN_TINT]
-    clearcoat = params[P_CLEARCOAT]
-    cc_gloss = params[P_CLEARCOAT_GLOSS]
-    flatness = params[P_FLATNESS]
-    spec_trans = params[P_TRANSMISSION]
-    cos_o = wo[2]
-    cos_i = wi[2]
-    if cos_o == ZERO or cos_i == ZERO:
-        return (ZERO, ZERO, ZERO), ZERO
-    brdf = (ONE - metallic) * (ONE - spec_trans)
-    bsdf = (ONE - metallic) * spec_trans
-    reflect = cos_o * cos_i > ZERO
-    front = cos_o > ZERO
-    eta_path = eta if front else ONE / eta
-    ax, ay = ggx_alphas(roughness, anisotropic)
-
-    k = ONE if reflect else eta_path
-    wh = normalize((wo[0] + wi[0] * k, wo[1] + wi[1] * k, wo[2] + wi[2] * k))
-    if wh[2] < ZERO:
-        wh = (-wh[0], -wh[1], -wh[2])
-    wo_h = dot(wo, wh)
-    wi_h = dot(wi, wh)
-    f_diel, _, eta_it, _ = fresnel_dielectric(wo_h, eta)
-    compat = mac_mic_compatible(wh, wo, wi, cos_o, reflect)
-
-    vr = ZERO
-    vg = ZERO
-    vb = ZERO
-    d = ggx_d(wh, ax, ay)
-    g = ggx_g1(wo, wh, ax, ay) * ggx_g1(wi, wh, ax, ay)
-
-    if reflect and compat and f_diel > ZERO:
-        # Principled Fresnel (Mitsuba's principled_fresnel): true dielectric Fresnel,
-        # blended with Schlick terms for the metallic and the tinted dielectric parts.
-        if front:
-            l = luminance(base_r, base_g, base_b)
-            tr = base_r / l if l > ZERO else ONE
-            tg = base_g / l if l > ZERO else ONE
-            tb = base_b / l if l > ZERO else ONE
-            r0 = (eta_it - ONE) / (eta_it + ONE)
-            r0 = r0 * r0
-            kd = (ONE - metallic) * (ONE - spec_tint) * f_diel
-            kt = (ONE - metallic) * spec_tint
-            fr = kd + metallic * schlick_fresnel(base_r, wo_h, eta) + \
-                kt * schlick_fresnel(tr * r0, wo_h, eta)
-            fg = kd + metallic * schlick_fresnel(base_g, wo_h, eta) + \
-                kt * schlick_fresnel(tg * r0, wo_h, eta)
-            fb = kd + metallic * schlick_fresnel(base_b, wo_h, eta) + \
-                kt * schlick_fresnel(tb * r0, wo_h, eta)
-        else:
-            fr = bsdf * f_diel
-            fg = fr
-            fb = fr
-        s = d * g / (FOUR * abs(cos_o))
-        vr += fr * s
-        vg += fg * s
-        vb += fb * s
-
-    if bsdf > ZERO and (not reflect) and compat and f_diel < ONE:
-        # Walter et al. 2007, eq. 21, for radiance: the (1/eta)^2 of radiance compression
-        # and the eta^2 of the Jacobian cancel.
-        den = wo_h + eta_path * wi_h
-        t = bsdf * abs((ONE - f_diel) * d * g * eta_path * eta_path * wo_h * wi_h /
-                       (cos_o * den * den)) / (eta_path * eta_path)
-        vr += math.sqrt(base_r) * t
-        vg += math.sqrt(base_g) * t
-        vb += math.sqrt(base_b) * t
-
-    cc_alpha = CC_ALPHA_HI + (CC_ALPHA_LO - CC_ALPHA_HI) * cc_gloss
-    if clearcoat > ZERO and reflect and compat and front:
-        fcc = schlick_fresnel(F0_CLEARCOAT, wo_h, eta)
-        dcc = gtr1_d(wh, cc_alpha)
-        gcc = smith_ggx1(wo, wh, CC_MASK_ALPHA) * smith_ggx1(wi, wh, CC_MASK_ALPHA)
-        c = clearcoat * QUARTER * fcc * dcc * gcc * abs(cos_i)
-        vr += c
-        vg += c
-        vb += c
-
-    if reflect and front:
-        fo = schlick_weight(abs(cos_i))
-        fi = schlick_weight(abs(cos_o))
-        cos_d = dot(wh, wi)
-        if brdf > ZERO:
-            f_diff = (ONE - HALF * fi) * (ONE - HALF * fo)
-            rr = TWO * roughness * cos_d * cos_d
-            f_retro = rr * (fo + fi + fo * fi * (rr - ONE))
-            fss90 = HALF * rr
-            fss = (ONE + (fss90 - ONE) * fo) * (ONE + (fss90 - ONE) * fi)
-            f_ss = SS_K * (fss * (ONE / (abs(cos_i) + abs(cos_o)) - HALF) + HALF)
-            lobe = (f_diff + f_retro) + (f_ss - (f_diff + f_retro)) * flatness
-            c = brdf * abs(cos_i) * INV_PI * lobe
-            vr += c * base_r
-            vg += c * base_g
-            vb += c * base_b
-        if sheen > ZERO and metallic < ONE:
-            fd = schlick_weight(abs(cos_d))
-            l = luminance(base_r, base_g, base_b)
-            tr = base_r / l if l > ZERO else ONE
-            tg = base_g / l if l > ZERO else ONE
-            tb = base_b / l if l > ZERO else ONE
-            c = sheen * (ONE - metallic) * fd * abs(cos_i)
-            vr += c * (ONE + (tr - ONE) * sheen_tint)
-            vg += c * (ONE + (tg - ONE) * sheen_tint)
-            vb += c * (ONE + (tb - ONE) * sheen_tint)
-
-    # ---- pdf ----
-    if front:
-        p_spec = ONE
-        p_cc = QUARTER * clearcoat
-        p_diff = brdf
-    else:
-        p_spec = ONE
-        p_cc = ZERO
-        p_diff = ZERO
-    total = p_spec + p_cc + p_diff
-    if front:
-        p_trans = bsdf * (ONE - f_diel)
-    else:
-        p_trans = ONE - f_diel
-    if bsdf <= ZERO and front:
-        p_trans = ZERO
-    p_refl = p_spec - p_trans
-    pdf = ZERO
-    wo_up = wo if cos_o > ZERO else (-wo[0], -wo[1], -wo[2])
-    if reflect:
-        dwh = abs(ONE / (FOUR * wi_h))
-    else:
-        den = wo_h + eta_path * wi_h
-        dwh = abs(eta_path * eta_path * wi_h / (den * den))
-    if compat:
-        vis = ggx_pdf_visible(wo_up, wh, ax, ay)
-        if reflect:
-            pdf += p_refl * vis * dwh
-            if p_cc > ZERO:
-                pdf += p_cc * gtr1_d(wh, cc_alpha) * wh[2] * dwh
-        else:
-            pdf += p_trans * vis * dwh
-    if reflect and p_diff > ZERO:
-        pdf += p_diff * abs(cos_i) * INV_PI
-    return (vr, vg, vb), pdf / total
-
-
-@device
 def reflect_about(w, m):
     k = TWO * dot(w, m)
     return (k * m[0] - w[0], k * m[1] - w[1], k * m[2] - w[2])
 
 
-@device
-def principled_sample(params, wo, u_lobe, u1, u2):
-    """(wi, weight = eval / pdf, pdf); pdf = 0: no sample (absorbed)."""
-    roughness = params[P_ROUGHNESS]
-    metallic = params[P_METALLIC]
-    eta = params[P_ETA]
-    anisotropic = params[P_ANISOTROPIC]
-    clearcoat = params[P_CLEARCOAT]
-    cc_gloss = params[P_CLEARCOAT_GLOSS]
-    spec_trans = params[P_TRANSMISSION]
-    cos_o = wo[2]
-    zero3 = (ZERO, ZERO, ZERO)
-    if cos_o == ZERO:
-        return zero3, zero3, ZERO
-    brdf = (ONE - metallic) * (ONE - spec_trans)
-    bsdf = (ONE - metallic) * spec_trans
-    front = cos_o > ZERO
-    if not front and bsdf <= ZERO:
-        return zero3, zero3, ZERO
-    ax, ay = ggx_alphas(roughness, anisotropic)
-    s = sign_of(cos_o)
-    wo_up = (wo[0] * s, wo[1] * s, wo[2] * s)
-    if front:
-        p_cc = QUARTER * clearcoat
-        p_diff = brdf
-    else:
-        p_cc = ZERO
-        p_diff = ZERO
-    total = ONE + p_cc + p_diff
-    x = u_lobe * total
-    reflected = True
-    if x < p_diff:
-        wi = square_to_cosine_hemisphere(u1, u2)
-    elif x < p_diff + p_cc:
-        cc_alpha = CC_ALPHA_HI + (CC_ALPHA_LO - CC_ALPHA_HI) * cc_gloss
-        m = gtr1_sample(cc_alpha, u1, u2)
-        wi = reflect_about(wo, m)
-    else:
-        m = ggx_sample_visible(wo_up, ax, ay, u1, u2)
-        f, cos_t, _, eta_ti = fresnel_dielectric(dot(wo, m), eta)
-        p_trans = (bsdf * (ONE - f)) if front else (ONE - f)
-        # Remaining mass of this uniform decides between reflection and refraction.
-        if x - (p_diff + p_cc) < p_trans:
-            c = dot(wo, m) * eta_ti + cos_t
-            wi = (-wo[0] * eta_ti + m[0] * c, -wo[1] * eta_ti + m[1] * c,
-                  -wo[2] * eta_ti + m[2] * c)
-            reflected = False
+class Lobes(NamedTuple):
+    """Which optional parts of the principled BSDF a kernel compiles (False: the scene's
+    materials leave that parameter at 0 everywhere, so the part would add nothing). The
+    specialised functions compute the same numbers as the full ones for such materials: a
+    zero parameter's terms are skipped, not approximated. Compiling the unused lobes out
+    shortens the GPU kernel, which the HDRI scenes' warps wait on for instructions (see
+    docs/benchmarks.md)."""
+    dielectric: bool = True    # False: every material is all metal (metallic 1)
+    clearcoat: bool = True
+    sheen: bool = True
+    transmission: bool = True
+    flatness: bool = True
+    spec_tint: bool = True
+    anisotropic: bool = True
+
+
+ALL_LOBES = Lobes()
+
+
+@functools.lru_cache(maxsize=None)
+def make_principled(lobes=ALL_LOBES):
+    """(principled_eval, principled_sample) compiling only the lobes in ``lobes``."""
+    DIELECTRIC, CLEARCOAT, SHEEN, TRANSMISSION, FLATNESS, SPEC_TINT, ANISOTROPIC = (
+        bool(x) for x in lobes)
+
+    @device
+    def principled_eval(params, wo, wi):
+        """(f(wo, wi) |cos theta_i| as rgb, pdf of principled_sample producing wi)."""
+        base_r = params[P_BASE]
+        base_g = params[P_BASE + 1]
+        base_b = params[P_BASE + 2]
+        roughness = params[P_ROUGHNESS]
+        metallic = params[P_METALLIC] if DIELECTRIC else ONE
+        eta = params[P_ETA]
+        # A lobe the scene's materials never use is a constant zero: its code is not compiled.
+        spec_tint = params[P_SPEC_TINT] if SPEC_TINT else ZERO
+        anisotropic = params[P_ANISOTROPIC] if ANISOTROPIC else ZERO
+        sheen = params[P_SHEEN] if SHEEN else ZERO
+        sheen_tint = params[P_SHEEN_TINT] if SHEEN else ZERO
+        clearcoat = params[P_CLEARCOAT] if CLEARCOAT else ZERO
+        cc_gloss = params[P_CLEARCOAT_GLOSS] if CLEARCOAT else ZERO
+        flatness = params[P_FLATNESS] if FLATNESS else ZERO
+        cos_o = wo[2]
+        cos_i = wi[2]
+        if cos_o == ZERO or cos_i == ZERO:
+            return (ZERO, ZERO, ZERO), ZERO
+        if TRANSMISSION:
+            spec_trans = params[P_TRANSMISSION]
+            brdf = (ONE - metallic) * (ONE - spec_trans)
+            bsdf = (ONE - metallic) * spec_trans
         else:
+            brdf = ONE - metallic
+            bsdf = ZERO
+        reflect = cos_o * cos_i > ZERO
+        front = cos_o > ZERO
+        eta_path = eta if front else ONE / eta
+        ax, ay = ggx_alphas(roughness, anisotropic)
+
+        k = ONE if reflect else eta_path
+        wh = normalize((wo[0] + wi[0] * k, wo[1] + wi[1] * k, wo[2] + wi[2] * k))
+        if wh[2] < ZERO:
+            wh = (-wh[0], -wh[1], -wh[2])
+        wo_h = dot(wo, wh)
+        wi_h = dot(wi, wh)
+        f_diel, _, eta_it, _ = fresnel_dielectric(wo_h, eta)
+        compat = mac_mic_compatible(wh, wo, wi, cos_o, reflect)
+
+        vr = ZERO
+        vg = ZERO
+        vb = ZERO
+        d = ggx_d(wh, ax, ay)
+        g = ggx_g1(wo, wh, ax, ay) * ggx_g1(wi, wh, ax, ay)
+
+        if reflect and compat and f_diel > ZERO:
+            # Principled Fresnel (Mitsuba's principled_fresnel): true dielectric Fresnel,
+            # blended with Schlick terms for the metallic and the tinted dielectric parts.
+            if front:
+                l = luminance(base_r, base_g, base_b)
+                tr = base_r / l if l > ZERO else ONE
+                tg = base_g / l if l > ZERO else ONE
+                tb = base_b / l if l > ZERO else ONE
+                r0 = (eta_it - ONE) / (eta_it + ONE)
+                r0 = r0 * r0
+                if SPEC_TINT:
+                    kd = (ONE - metallic) * (ONE - spec_tint) * f_diel
+                    kt = (ONE - metallic) * spec_tint
+                    fr = kd + metallic * schlick_fresnel(base_r, wo_h, eta) + \
+                        kt * schlick_fresnel(tr * r0, wo_h, eta)
+                    fg = kd + metallic * schlick_fresnel(base_g, wo_h, eta) + \
+                        kt * schlick_fresnel(tg * r0, wo_h, eta)
+                    fb = kd + metallic * schlick_fresnel(base_b, wo_h, eta) + \
+                        kt * schlick_fresnel(tb * r0, wo_h, eta)
+                else:
+                    kd = (ONE - metallic) * f_diel
+                    fr = kd + metallic * schlick_fresnel(base_r, wo_h, eta)
+                    fg = kd + metallic * schlick_fresnel(base_g, wo_h, eta)
+                    fb = kd + metallic * schlick_fresnel(base_b, wo_h, eta)
+            else:
+                fr = bsdf * f_diel
+                fg = fr
+                fb = fr
+            s = d * g / (FOUR * abs(cos_o))
+            vr += fr * s
+            vg += fg * s
+            vb += fb * s
+
+        if TRANSMISSION and bsdf > ZERO and (not reflect) and compat and f_diel < ONE:
+            # Walter et al. 2007, eq. 21, for radiance: the (1/eta)^2 of radiance compression
+            # and the eta^2 of the Jacobian cancel.
+            den = wo_h + eta_path * wi_h
+            t = bsdf * abs((ONE - f_diel) * d * g * eta_path * eta_path * wo_h * wi_h /
+                           (cos_o * den * den)) / (eta_path * eta_path)
+            vr += math.sqrt(base_r) * t
+            vg += math.sqrt(base_g) * t
+            vb += math.sqrt(base_b) * t
+
+        cc_alpha = CC_ALPHA_HI + (CC_ALPHA_LO - CC_ALPHA_HI) * cc_gloss
+        if CLEARCOAT and clearcoat > ZERO and reflect and compat and front:
+            fcc = schlick_fresnel(F0_CLEARCOAT, wo_h, eta)
+            dcc = gtr1_d(wh, cc_alpha)
+            gcc = smith_ggx1(wo, wh, CC_MASK_ALPHA) * smith_ggx1(wi, wh, CC_MASK_ALPHA)
+            c = clearcoat * QUARTER * fcc * dcc * gcc * abs(cos_i)
+            vr += c
+            vg += c
+            vb += c
+
+        if reflect and front:
+            fo = schlick_weight(abs(cos_i))
+            fi = schlick_weight(abs(cos_o))
+            cos_d = dot(wh, wi)
+            if brdf > ZERO:
+                f_diff = (ONE - HALF * fi) * (ONE - HALF * fo)
+                rr = TWO * roughness * cos_d * cos_d
+                f_retro = rr * (fo + fi + fo * fi * (rr - ONE))
+                fss90 = HALF * rr
+                fss = (ONE + (fss90 - ONE) * fo) * (ONE + (fss90 - ONE) * fi)
+                f_ss = SS_K * (fss * (ONE / (abs(cos_i) + abs(cos_o)) - HALF) + HALF)
+                lobe = f_diff + f_retro
+                if FLATNESS:
+                    lobe = lobe + (f_ss - lobe) * flatness
+                c = brdf * abs(cos_i) * INV_PI * lobe
+                vr += c * base_r
+                vg += c * base_g
+                vb += c * base_b
+            if SHEEN and sheen > ZERO and metallic < ONE:
+                fd = schlick_weight(abs(cos_d))
+                l = luminance(base_r, base_g, base_b)
+                tr = base_r / l if l > ZERO else ONE
+                tg = base_g / l if l > ZERO else ONE
+                tb = base_b / l if l > ZERO else ONE
+                c = sheen * (ONE - metallic) * fd * abs(cos_i)
+                vr += c * (ONE + (tr - ONE) * sheen_tint)
+                vg += c * (ONE + (tg - ONE) * sheen_tint)
+                vb += c * (ONE + (tb - ONE) * sheen_tint)
+
+        # ---- pdf ----
+        if front:
+            p_spec = ONE
+            p_cc = QUARTER * clearcoat
+            p_diff = brdf
+        else:
+            p_spec = ONE
+            p_cc = ZERO
+            p_diff = ZERO
+        total = p_spec + p_cc + p_diff
+        if front:
+            p_trans = bsdf * (ONE - f_diel)
+        else:
+            p_trans = ONE - f_diel
+        if bsdf <= ZERO and front:
+            p_trans = ZERO
+        p_refl = p_spec - p_trans
+        pdf = ZERO
+        wo_up = wo if cos_o > ZERO else (-wo[0], -wo[1], -wo[2])
+        if reflect:
+            dwh = abs(ONE / (FOUR * wi_h))
+        else:
+            den = wo_h + eta_path * wi_h
+            dwh = abs(eta_path * eta_path * wi_h / (den * den))
+        if compat:
+            vis = ggx_pdf_visible(wo_up, wh, ax, ay)
+            if reflect:
+                pdf += p_refl * vis * dwh
+                if CLEARCOAT and p_cc > ZERO:
+                    pdf += p_cc * gtr1_d(wh, cc_alpha) * wh[2] * dwh
+            else:
+                pdf += p_trans * vis * dwh
+        if reflect and p_diff > ZERO:
+            pdf += p_diff * abs(cos_i) * INV_PI
+        return (vr, vg, vb), pdf / total
+
+    @device
+    def principled_sample(params, wo, u_lobe, u1, u2):
+        """(wi, weight = eval / pdf, pdf); pdf = 0: no sample (absorbed)."""
+        roughness = params[P_ROUGHNESS]
+        metallic = params[P_METALLIC] if DIELECTRIC else ONE
+        eta = params[P_ETA]
+        anisotropic = params[P_ANISOTROPIC] if ANISOTROPIC else ZERO
+        clearcoat = params[P_CLEARCOAT] if CLEARCOAT else ZERO
+        cc_gloss = params[P_CLEARCOAT_GLOSS] if CLEARCOAT else ZERO
+        cos_o = wo[2]
+        zero3 = (ZERO, ZERO, ZERO)
+        if cos_o == ZERO:
+            return zero3, zero3, ZERO
+        if TRANSMISSION:
+            spec_trans = params[P_TRANSMISSION]
+            brdf = (ONE - metallic) * (ONE - spec_trans)
+            bsdf = (ONE - metallic) * spec_trans
+        else:
+            brdf = ONE - metallic
+            bsdf = ZERO
+        front = cos_o > ZERO
+        if not front and bsdf <= ZERO:
+            return zero3, zero3, ZERO
+        ax, ay = ggx_alphas(roughness, anisotropic)
+        s = sign_of(cos_o)
+        wo_up = (wo[0] * s, wo[1] * s, wo[2] * s)
+        if front:
+            p_cc = QUARTER * clearcoat
+            p_diff = brdf
+        else:
+            p_cc = ZERO
+            p_diff = ZERO
+        total = ONE + p_cc + p_diff
+        x = u_lobe * total
+        reflected = True
+        if x < p_diff:
+            wi = square_to_cosine_hemisphere(u1, u2)
+        elif CLEARCOAT and x < p_diff + p_cc:
+            cc_alpha = CC_ALPHA_HI + (CC_ALPHA_LO - CC_ALPHA_HI) * cc_gloss
+            m = gtr1_sample(cc_alpha, u1, u2)
             wi = reflect_about(wo, m)
-    # A microfacet reflection that leaves below the macro surface (or a refraction that
-    # stays on wo's side) is absorbed, as in Mitsuba: eval would otherwise account for it
-    # under another lobe's density.
-    if (wo[2] * wi[2] > ZERO) != reflected:
-        return wi, zero3, ZERO
-    val, pdf = principled_eval(params, wo, wi)
-    if not (pdf > ZERO):
-        return wi, zero3, ZERO
-    inv = ONE / pdf
-    return wi, (val[0] * inv, val[1] * inv, val[2] * inv), pdf
+        else:
+            m = ggx_sample_visible(wo_up, ax, ay, u1, u2)
+            f, cos_t, _, eta_ti = fresnel_dielectric(dot(wo, m), eta)
+            p_trans = (bsdf * (ONE - f)) if front else (ONE - f)
+            # Remaining mass of this uniform decides between reflection and refraction.
+            if TRANSMISSION and x - (p_diff + p_cc) < p_trans:
+                c = dot(wo, m) * eta_ti + cos_t
+                wi = (-wo[0] * eta_ti + m[0] * c, -wo[1] * eta_ti + m[1] * c,
+                      -wo[2] * eta_ti + m[2] * c)
+                reflected = False
+            else:
+                wi = reflect_about(wo, m)
+        # A microfacet reflection that leaves below the macro surface (or a refraction that
+        # stays on wo's side) is absorbed, as in Mitsuba: eval would otherwise account for it
+        # under another lobe's density.
+        if (wo[2] * wi[2] > ZERO) != reflected:
+            return wi, zero3, ZERO
+        val, pdf = principled_eval(params, wo, wi)
+        if not (pdf > ZERO):
+            return wi, zero3, ZERO
+        inv = ONE / pdf
+        return wi, (val[0] * inv, val[1] * inv, val[2] * inv), pdf
+
+    return principled_eval, principled_sample
+
+
+# The full BSDF (every lobe): the tests' reference and the kernels of scenes that use all.
+principled_eval, principled_sample = make_principled()

@@ -13,7 +13,7 @@ from .device import device, step_marker
 from .layout import P_BASE, specialise
 from .materials import diffuse_eval_local, diffuse_sample_local
 from .normalmap import NM_FLAT_COS, consistent_with_smooth, mapped_frame, mirror_smooth
-from .principled import principled_eval, principled_sample
+from .principled import Lobes, make_principled
 from .surface import offset_origin
 from .vec import add, dot, madd, neg, scale, to_world
 
@@ -62,6 +62,7 @@ def make_scatter(features, target="cpu"):
     FOLD = S.fold
     LEAN = S.lean
     NORMAL_MAP = S.normal_map
+    principled_eval, principled_sample = make_principled(Lobes(*S.lobes))
 
     @step
     def material_eval(is_principled, params, wo_l, wi_l):

@@ -39,6 +39,7 @@ from ..kernels.layout import (CAM_CONE, CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_
                               TEX_OFFSET, TEX_SCALE, TEX_TILE, TEX_WIDTH, TRI_E1, TRI_E2,
                               TRI_N_WIDTH, TRI_T0, TRI_T_SIGN, TRI_T_WIDTH, TRI_UV_WIDTH, TRI_V0,
                               TRI_V_WIDTH, Features, SceneArrays, point_light_ref)
+from ..kernels import layout as L
 from .errors import SceneError
 from .geometry import safe_normalize, vertex_normals, vertex_tangents
 from .images import (load_texture, mip_chain, mip_levels, mip_texels, read_image,
@@ -154,7 +155,8 @@ def compile_scene(desc, use_cache=True, bvh_options=None, memo=None):
         tangents=use_tangents, env_map=env.has_map, thin_lens=desc.camera.lens_radius > 0,
         sobol=desc.render.sampler == "sobol",
         wrap_modes=use_textures and any(p[4] != ("repeat", "repeat") for p in tables.tex_params),
-        mipmaps=use_textures and any(p[0] == "trilinear" for p in tables.tex_params))
+        mipmaps=use_textures and any(p[0] == "trilinear" for p in tables.tex_params),
+        **principled_lobes(mat, mat_tex))
     cam = camera_array(desc.camera, tri.shift, desc.render.spp)
     if not (np.isfinite(cam).all() and np.abs(cam).max() <= limits.FLOAT32_MAX):
         raise SceneError("the camera's numbers overflow float32 (position, fov, aperture or "
@@ -225,6 +227,28 @@ def camera_array(cam, shift=np.zeros(3), spp=1):
 
 # ---------------------------------------------------------------------------------------
 # Stage 1: materials and textures
+
+# Features flag: (material column, texture slot) of the principled parameter it follows
+LOBE_PARAMS = {"clearcoat": (L.M_CLEARCOAT, L.T_CLEARCOAT), "sheen": (L.M_SHEEN, L.T_SHEEN),
+               "transmission": (L.M_TRANSMISSION, L.T_TRANSMISSION),
+               "flatness": (L.M_SUBSURFACE, L.T_SUBSURFACE),
+               "spec_tint": (L.M_SPEC_TINT, L.T_SPEC_TINT),
+               "anisotropic": (L.M_ANISOTROPIC, L.T_ANISOTROPIC)}
+
+
+def principled_lobes(mat, mat_tex):
+    """The Features flags of the principled BSDF's optional parts: whether some principled
+    material sets the parameter above 0 or reads it from a texture (the kernel clamps it to
+    [0, 1], so a value of 0 or below turns the part off); ``dielectric``: whether one has
+    metallic below 1 (or textured)."""
+    principled = mat[:, M_TYPE] == MAT_PRINCIPLED
+    flags = {"dielectric": bool(np.any(principled & (
+        (mat[:, L.M_METALLIC] < 1) | (mat_tex[:, L.T_METALLIC] != NO_TEXTURE))))}
+    flags.update({name: bool(np.any(principled & (
+        (mat[:, col] > 0) | (mat_tex[:, slot] != NO_TEXTURE)))) for name, (col, slot)
+        in LOBE_PARAMS.items()})
+    return flags
+
 
 class MaterialTables:
     """Materials and textures being collected into the kernel's arrays."""
