@@ -33,7 +33,7 @@ VARIANTS = {
     "groups-r64": dict(fast=False),
     "groups-fast": dict(max_registers=None),
     "default": dict(),              # groups (2^23 threads, 2^21 without an environment),
-    #                                 64 registers, approximate arithmetic
+    #                                 64 registers (56 with an HDRI), approximate arithmetic
     # path regeneration (kernels.integrator.regenerates) forced on / off
     "regen": dict(regenerate=True),                 # 2^21 threads
     "regen-t2^23": dict(regenerate=True, target_threads=1 << 23),
@@ -41,6 +41,7 @@ VARIANTS = {
     "nested-t2^21": dict(regenerate=False, target_threads=1 << 21),
     "r48": dict(max_registers=48),
     "r56": dict(max_registers=56),
+    "r64": dict(max_registers=64),
     "r72": dict(max_registers=72),
     "b32x4": dict(block=(32, 4)),
     "b8x8": dict(block=(8, 8)),

@@ -31,7 +31,7 @@ if "NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS" not in os.environ:
 from .._cache import jit_cache
 
 from ..kernels.constants import STACK_SIZE
-from ..kernels.layout import AOV_WIDTH
+from ..kernels.layout import AOV_WIDTH, specialise
 from ..kernels.integrator import SceneArrays, make_aov_pixel, make_render_pixel, regenerates
 
 BLOCK = (16, 8)
@@ -50,6 +50,17 @@ MAX_SLICES = 1 << 23
 # shading better than the registers save (H100, 2026-11-23: +11-28 % on every benchmark
 # scene; 80 and 96 were in between). bench/gpu_launch.py measures the alternatives.
 MAX_REGISTERS = 64
+# The kernels of scenes with an HDRI (the principled BSDF, the sky's tables; warps that wait
+# on instruction fetch) gain from a tighter cap, the Cornell box loses (H100, 2026-11-24,
+# bench.gpu_launch r56 against the default, alternating: bunny-studio +2 %, sun +3-4 %, the
+# Cornell box -1.8 %).
+MAX_REGISTERS_ENV_MAP = 56
+AUTO = "auto"
+
+
+def max_registers_for(features):
+    """The register cap of the pass kernel for scenes with ``features``."""
+    return MAX_REGISTERS_ENV_MAP if specialise(features).env_map else MAX_REGISTERS
 # fast=True: NVVM's approximate division and square root and flushed denormals (ftz=1,
 # prec_div=0, prec_sqrt=0, fma=1) and LLVM's fast-math flags except nnan and ninf: the
 # kernels test for NaN and rely on IEEE infinities (the slab test divides by zero).
@@ -226,9 +237,13 @@ def sample_groups(width, height, n_samples, target_threads=TARGET_THREADS):
 class CUDABackend:
     name = "cuda"
 
-    def __init__(self, scene, block=BLOCK, max_registers=MAX_REGISTERS, fast=True,
+    def __init__(self, scene, block=BLOCK, max_registers=AUTO, fast=True,
                  target_threads=None, regenerate=None):
+        """max_registers: the pass kernel's register cap (None: no cap; AUTO:
+        max_registers_for the scene's features)."""
         self.scene = scene
+        if max_registers == AUTO:
+            max_registers = max_registers_for(scene.features)
         self.block = tuple(block)
         if regenerate is None:
             regenerate = regenerates(scene.features, "cuda")
