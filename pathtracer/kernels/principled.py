@@ -243,6 +243,14 @@ def make_principled(lobes=ALL_LOBES):
         bool(x) for x in lobes)
 
     @device
+    def lobe_weights(params, metallic):
+        """(brdf, bsdf): the weights of the diffuse-reflecting and the transmitting part."""
+        if TRANSMISSION:
+            spec_trans = params[P_TRANSMISSION]
+            return (ONE - metallic) * (ONE - spec_trans), (ONE - metallic) * spec_trans
+        return ONE - metallic, ZERO
+
+    @device
     def principled_eval(params, wo, wi):
         """(f(wo, wi) |cos theta_i| as rgb, pdf of principled_sample producing wi)."""
         base_r = params[P_BASE]
@@ -263,13 +271,7 @@ def make_principled(lobes=ALL_LOBES):
         cos_i = wi[2]
         if cos_o == ZERO or cos_i == ZERO:
             return (ZERO, ZERO, ZERO), ZERO
-        if TRANSMISSION:
-            spec_trans = params[P_TRANSMISSION]
-            brdf = (ONE - metallic) * (ONE - spec_trans)
-            bsdf = (ONE - metallic) * spec_trans
-        else:
-            brdf = ONE - metallic
-            bsdf = ZERO
+        brdf, bsdf = lobe_weights(params, metallic)
         reflect = cos_o * cos_i > ZERO
         front = cos_o > ZERO
         eta_path = eta if front else ONE / eta
@@ -421,13 +423,7 @@ def make_principled(lobes=ALL_LOBES):
         zero3 = (ZERO, ZERO, ZERO)
         if cos_o == ZERO:
             return zero3, zero3, ZERO
-        if TRANSMISSION:
-            spec_trans = params[P_TRANSMISSION]
-            brdf = (ONE - metallic) * (ONE - spec_trans)
-            bsdf = (ONE - metallic) * spec_trans
-        else:
-            brdf = ONE - metallic
-            bsdf = ZERO
+        brdf, bsdf = lobe_weights(params, metallic)
         front = cos_o > ZERO
         if not front and bsdf <= ZERO:
             return zero3, zero3, ZERO
