@@ -51,6 +51,7 @@ VARIANTS = {
     "t2^21": dict(target_threads=1 << 21),
     "t2^22": dict(target_threads=1 << 22),
     "t2^23": dict(target_threads=1 << 23),
+    "t2^24": dict(target_threads=1 << 24),
 }
 
 
