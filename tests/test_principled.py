@@ -214,6 +214,17 @@ LOBE_CASES = ([("dielectric",)] + [("dielectric", f) for f in list(LOBE_OFF)[1:]
               [tuple(list(LOBE_OFF)[1:])])
 
 
+def test_lobe_flags_reach_the_bsdf_in_order():
+    """Features' lobe flags, the Specialisation's lobes tuple and kernels.principled.Lobes
+    name the same parts in the same order (make_scatter passes them on by position)."""
+    from pathtracer.kernels.layout import Features, specialise
+    assert Features._fields[-len(Lobes._fields):] == Lobes._fields
+    for k, name in enumerate(Lobes._fields):
+        f = Features(False, False, False, False, principled=True,
+                     **{n: n == name for n in Lobes._fields})
+        assert Lobes(*specialise(f).lobes) == Lobes(*(i == k for i in range(len(Lobes._fields))))
+
+
 @pytest.mark.parametrize("on", LOBE_CASES, ids=["-".join(c) for c in LOBE_CASES])
 def test_lobes_compiled_out_change_nothing(on):
     """The BSDF specialised for materials without some lobes (kernels compile only the

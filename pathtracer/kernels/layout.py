@@ -311,7 +311,8 @@ def specialise(features):
         normal_map=normal_map, tangents=f.tangents, thin_lens=f.thin_lens, fold=fold,
         lean=not f.principled and not fold, sobol=f.sobol,
         wrap_modes=f.wrap_modes and f.textures, mipmaps=f.mipmaps and f.textures,
-        lobes=(f.dielectric, f.clearcoat, f.sheen, f.transmission, f.flatness, f.spec_tint, f.anisotropic))
+        lobes=(f.dielectric, f.clearcoat, f.sheen, f.transmission, f.flatness, f.spec_tint,
+               f.anisotropic))
 
 
 class SceneArrays(NamedTuple):

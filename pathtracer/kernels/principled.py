@@ -8,8 +8,8 @@ naming: ``wo`` points to where the light goes (the viewer), ``wi`` to where it c
 (the sampled direction). Mitsuba calls these ``si.wi`` and ``wo``. ``eval`` returns the BSDF
 times |cos theta_i| (as Mitsuba's ``eval``), so ``weight = eval / pdf``.
 
-``params`` is the tuple of parameters (the ``P_*`` fields of :mod:`.layout`), already read from the material
-(and its textures) at the shading point. ``eta`` is the interior/exterior index; the side
+``params`` is the tuple of parameters (the ``P_*`` fields of :mod:`.layout`), already read
+from the material (and its textures) at the shading point. ``eta`` is the interior/exterior index; the side
 of ``wo`` (wo.z > 0: outside) decides which way the interface is crossed.
 
 Lobes (Mitsuba's names): diffuse with retro-reflection and Hanrahan-Krueger flattening
