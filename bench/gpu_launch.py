@@ -32,8 +32,11 @@ VARIANTS = {
     "groups-exact": dict(max_registers=None, fast=False),
     "groups-r64": dict(fast=False),
     "groups-fast": dict(max_registers=None),
-    "default": dict(),              # groups (2^23 threads, 2^21 without an environment),
-    #                                 64 registers (56 with an HDRI), approximate arithmetic
+    "default": dict(),              # what ships: the wavefront kernels for scenes with an
+    #                                 HDRI, else the megakernel in groups (2^23 threads, 2^21
+    #                                 without an environment); 64 registers (56 with an
+    #                                 HDRI), approximate arithmetic
+    "megakernel": dict(wavefront=False),
     # path regeneration (kernels.integrator.regenerates) forced on / off
     "regen": dict(regenerate=True),                 # 2^21 threads
     "regen-t2^23": dict(regenerate=True, target_threads=1 << 23),
@@ -52,10 +55,25 @@ VARIANTS = {
     "t2^22": dict(target_threads=1 << 22),
     "t2^23": dict(target_threads=1 << 23),
     "t2^24": dict(target_threads=1 << 24),
+    # the wavefront kernels (backends.wavefront); t: the queue launches' threads
+    "wave": dict(wavefront=True),
+    "wave-r48": dict(wavefront=True, max_registers=48),
+    "wave-r64": dict(wavefront=True, max_registers=64),
+    "wave-r96": dict(wavefront=True, max_registers=96),
+    "wave-rnone": dict(wavefront=True, max_registers=None),
+    "wave-t2^18": dict(wavefront=True, target_threads=1 << 18),
+    "wave-t2^19": dict(wavefront=True, target_threads=1 << 19),
+    "wave-t2^21": dict(wavefront=True, target_threads=1 << 21),
+    # l: vertices launched apart before one launch finishes the paths (all: every vertex)
+    "wave-l1": dict(wavefront=dict(wave_levels=1)),
+    "wave-l2": dict(wavefront=dict(wave_levels=2)),
+    "wave-l3": dict(wavefront=dict(wave_levels=3)),
+    "wave-l4": dict(wavefront=dict(wave_levels=4)),
+    "wave-all": dict(wavefront=dict(wave_levels=None)),
 }
 
 
-def time_ours(scene, options, spp, repeats):
+def time_ours(scene, options, spp, repeats, kernel_times=False):
     from numba import cuda
 
     from bench.common import median_time
@@ -74,9 +92,20 @@ def time_ours(scene, options, spp, repeats):
 
     one()
     t, times = median_time(one, repeats)
-    regs = list(b.registers().values())
+    extra = {}
+    if kernel_times and b.wavefront is not None:
+        # one more pass with each launch between CUDA events: GPU seconds per kernel and
+        # per vertex, and the queues' lengths (of the pass's last sample range)
+        b.wavefront.events = []
+        one()
+        extra["kernel_s"] = b.wavefront.kernel_times()
+        b.wavefront.events = None
+        extra["queue_lengths"] = [int(n) for n in b.wavefront._counts.copy_to_host()]
+    regs = b.registers()
+    if len(regs) == 1:
+        regs = list(regs.values())[0]
     return {"pass_s": times, "paths_per_s": scene.width * scene.height * spp / t,
-            "compile_s": compile_s, "registers": regs[0] if regs else None}
+            "compile_s": compile_s, "registers": regs or None, **extra}
 
 
 def time_mitsuba(name, desc, spp, repeats):
@@ -104,6 +133,8 @@ def main(argv=None):
     p.add_argument("--mitsuba", action="store_true")
     p.add_argument("--sampler", choices=("sobol", "independent"),
                    help="override the scenes' sampler (default: theirs, sobol)")
+    p.add_argument("--kernel-times", action="store_true",
+                   help="wavefront variants: also GPU time per kernel and vertex (one pass)")
     p.add_argument("--json")
     a = p.parse_args(argv)
     rec = {"command": command(), "machine": machine(), "date": now(), "versions": versions(),
@@ -116,13 +147,16 @@ def main(argv=None):
             scene = compile_scene(desc)
             row = {}
             for v in a.variants.split(","):
-                got = time_ours(scene, VARIANTS[v], spp, a.repeats)
+                got = time_ours(scene, VARIANTS[v], spp, a.repeats, a.kernel_times)
                 rec["results"].append(dict(scene=name, resolution=res, spp=spp, variant=v,
                                            **got))
                 row[v] = got["paths_per_s"]
                 print(f"{name:13s} {res[0]}x{res[1]} x{spp:3d} {v:16s} "
                       f"{got['paths_per_s'] / 1e6:8.1f} M paths/s  regs {got['registers']}  "
                       f"compile {got['compile_s']:.1f} s", flush=True)
+                if "kernel_s" in got:
+                    print("    GPU ms: " + ", ".join(f"{k} {t * 1e3:.2f}" for k, t in
+                                                    got["kernel_s"].items()), flush=True)
             if a.mitsuba:
                 try:
                     got = time_mitsuba(name, desc, spp, a.repeats)

@@ -29,6 +29,26 @@ out["stats_equal"] = bool((sa == sb).all())
 c, tc = [x.copy() for x in CUDABackend(s).render_pass_totals(0, 2, 1, 7, 5)]
 out["totals_equal"] = bool((c == a).all() and tc.shape == (1, 1, 3) and
                            (tc.reshape(3) == sb.reshape(-1, 3).sum(axis=0)).all())
+# The wavefront kernels (backends.wavefront): the CPU's image, with a pass split into
+# sample ranges (max_paths), with every vertex launched apart or the tail finished in one
+# launch, and with pixels left out (adaptive sampling)
+wave = {}
+active = np.ones((5, 6), np.uint8)
+active[2, 3] = 0
+m5 = CUDABackend(s, wavefront=False).render_pass(0, 5, 1, 7, 5)[0].copy()
+for name, options in [("finish", dict(wave_levels=2)), ("all", dict(wave_levels=None))]:
+    w = CUDABackend(s, wavefront=options)
+    w.wavefront.max_paths = 60          # 2 of the pass's 5 samples per launch
+    x, sx = [v.copy() for v in w.render_pass(0, 5, 1, 7, 5)]
+    y, sy = [v.copy() for v in CPUBackend(s).render_pass(0, 5, 1, 7, 5)]
+    xa, sxa = [v.copy() for v in w.render_pass(0, 5, 1, 7, 5, active)]
+    wave[name] = dict(maxdiff=float(np.abs(x - y).max()), sum=float(x.sum()),
+                      # the same code, the same sums in the same order: bit for bit
+                      equal_megakernel=bool((x == m5).all()),
+                      stats_equal=bool((sx == sy).all()),
+                      active_equal=bool((xa[active == 1] == x[active == 1]).all()),
+                      inactive_zero=bool((xa[2, 3] == 0).all() and (sxa[2, 3] == 0).all()))
+out["wavefront"] = wave
 # Furnace on the simulator: L = Le * sum_{k<=3} a^k.
 f = load_scene(write_scene(tempfile.mkdtemp(), furnace_scene(0.5, 0.5, 3, res=(4, 4))))
 img, st = CUDABackend(f).render_pass(0, 24, 0, 3, 5)
@@ -54,3 +74,7 @@ def test_cuda_kernel_on_simulator():
     expected = 0.5 * (1 + 0.5 + 0.25 + 0.125)
     assert abs(out["furnace_mean"] - expected) < 5 * out["furnace_se"] + 1e-6, out
     assert out["nonfinite"] == 0
+    for name, got in out["wavefront"].items():
+        assert got["sum"] > 0 and got["maxdiff"] < 1e-4, (name, got)
+        assert got["equal_megakernel"], (name, got)
+        assert got["stats_equal"] and got["active_equal"] and got["inactive_zero"], (name, got)

@@ -139,6 +139,29 @@ def test_full_feature_parity(tmp_path):
 
 
 @gpu
+def test_wavefront_equals_megakernel(tmp_path):
+    """The wavefront kernels (backends.wavefront) and the megakernel run the same steps on
+    the same random numbers and add a pixel's samples in the same order: the same image
+    and ray counts, with the pass in one launch or in sample ranges, with the tail finished
+    in one launch or every vertex launched apart, and with pixels left out."""
+    from pathtracer.backends.cuda import CUDABackend
+    s = _full_feature_scene(tmp_path)
+    mega = CUDABackend(s, wavefront=False)
+    a, sa = [x.copy() for x in mega.render_pass(0, 16, 1, 6, 2)]
+    active = np.ones((s.height, s.width), np.uint8)
+    active[::3, ::2] = 0
+    am, _ = [x.copy() for x in mega.render_pass(0, 16, 1, 6, 2, active)]
+    for options in (dict(), dict(wave_levels=None), dict(max_paths=s.width * s.height * 5)):
+        wave = CUDABackend(s, wavefront=options)
+        b, sb = [x.copy() for x in wave.render_pass(0, 16, 1, 6, 2)]
+        assert np.allclose(a, b, rtol=1e-5, atol=1e-6), (options, np.abs(a - b).max())
+        assert (sa == sb).all(), options
+        bm, _ = [x.copy() for x in wave.render_pass(0, 16, 1, 6, 2, active)]
+        assert np.allclose(am, bm, rtol=1e-5, atol=1e-6), options
+        assert (bm[active == 0] == 0).all()
+
+
+@gpu
 def test_aov_parity(tmp_path):
     """The denoiser's albedo and normal images are the same on the CPU and the GPU."""
     from pathtracer.backends import make_backend

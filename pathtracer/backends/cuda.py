@@ -61,6 +61,21 @@ AUTO = "auto"
 def max_registers_for(features):
     """The register cap of the pass kernel for scenes with ``features``."""
     return MAX_REGISTERS_ENV_MAP if specialise(features).env_map else MAX_REGISTERS
+
+
+# Where the wavefront kernels render (wavefront_for), passes of fewer camera paths than this
+# render with the megakernel: the Python and driver time of the wavefront's ~10 launches per
+# pass is not hidden behind a small pass's GPU time, such as the first passes of a
+# progressive render (256x192 x 1 spp: 49k paths). Both kernels are compiled.
+WAVE_MIN_PATHS = 1 << 21
+
+
+def wavefront_for(features):
+    """Whether scenes with ``features`` render with the wavefront kernels
+    (backends.wavefront) rather than the megakernel: those with an HDRI, whose warps
+    diverge most (H100, 2026-11-24, bench.gpu_launch: bunny-studio and sun +4-5 %); not the
+    others (the Cornell box, whose megakernel regenerates paths: -18 to -27 %)."""
+    return specialise(features).env_map
 # fast=True: NVVM's approximate division and square root and flushed denormals (ftz=1,
 # prec_div=0, prec_sqrt=0, fma=1) and LLVM's fast-math flags except nnan and ninf: the
 # kernels test for NaN and rely on IEEE infinities (the slab test divides by zero).
@@ -238,18 +253,35 @@ class CUDABackend:
     name = "cuda"
 
     def __init__(self, scene, block=BLOCK, max_registers=AUTO, fast=True,
-                 target_threads=None, regenerate=None):
+                 target_threads=None, regenerate=None, wavefront=AUTO):
         """max_registers: the pass kernel's register cap (None: no cap; AUTO:
-        max_registers_for the scene's features)."""
+        max_registers_for the scene's features); wavefront: render with the wavefront
+        kernels (backends.wavefront) instead of the megakernel (True, or a dict of
+        WavefrontLaunch's options; AUTO: wavefront_for the scene's features)."""
         self.scene = scene
         if max_registers == AUTO:
             max_registers = max_registers_for(scene.features)
         self.block = tuple(block)
         if regenerate is None:
             regenerate = regenerates(scene.features, "cuda")
+        wave_threads = target_threads
+        # passes of fewer paths than this render with the megakernel (see WAVE_MIN_PATHS)
+        self.wave_min_paths = 0
+        if wavefront == AUTO:
+            from .wavefront import fits
+            wavefront = wavefront_for(scene.features) and fits(scene.width, scene.height)
+            self.wave_min_paths = WAVE_MIN_PATHS
         if target_threads is None:
             target_threads = TARGET_THREADS_REGENERATING if regenerate else TARGET_THREADS
         self.target_threads = target_threads
+        self.wavefront = None
+        if wavefront:
+            from .wavefront import WavefrontLaunch
+            wave_options = dict(wavefront) if isinstance(wavefront, dict) else {}
+            if wave_threads is not None:
+                wave_options.setdefault("wave_threads", wave_threads)
+            self.wavefront = WavefrontLaunch(scene.features, scene.width, scene.height,
+                                             max_registers, fast, self.block, **wave_options)
         self.kernel = pass_kernel(scene.features, max_registers, bool(fast), bool(regenerate))
         self.d_scene = _aligned(SceneArrays(*[cuda.to_device(a) for a in scene.arrays]))
         h, w = scene.height, scene.width
@@ -279,7 +311,10 @@ class CUDABackend:
         rendering, so that no pass pays for it; once per backend."""
         if self._compiled:
             return
-        self.render_pass(0, 0, 0, 0, 0)
+        if self.wavefront is not None:
+            self.wavefront.compile(self.d_scene, self.d_out, self.d_stats)
+        if self.wavefront is None or self.wave_min_paths > 0:
+            self.launch(0, 0, 0, 0, 0, megakernel=True)
         parts, part_stats = self._scratch(1)     # views of the film: same types, no memory
         sum_groups[(1, 1), (1, 1)](parts, part_stats, 1, self.d_out, self.d_stats)
         # (the ray-count sum of render_pass_totals: its first compile cost the first pass of
@@ -300,9 +335,16 @@ class CUDABackend:
                            cuda.device_array((groups, h, w, 3), np.int32))
         return self._parts[0][:groups], self._parts[1][:groups]
 
-    def launch(self, sample_start, n_samples, seed, max_bounces, rr_depth, active=None):
-        """Start a pass without waiting (for timing the kernel alone)."""
+    def launch(self, sample_start, n_samples, seed, max_bounces, rr_depth, active=None,
+               megakernel=False):
+        """Start a pass without waiting (for timing the kernel alone); ``megakernel``:
+        with the megakernel even where the wavefront kernels would render it."""
         d_active = self.d_all_pixels if active is None else cuda.to_device(active)
+        if self.wavefront is not None and not megakernel and \
+                n_samples * self.scene.width * self.scene.height >= self.wave_min_paths:
+            self.wavefront.launch(self.d_scene, self.d_out, self.d_stats, d_active,
+                                  sample_start, n_samples, seed, max_bounces, rr_depth)
+            return
         groups = sample_groups(self.scene.width, self.scene.height, n_samples,
                                self.target_threads)
         parts, part_stats = self._scratch(groups)
@@ -360,8 +402,16 @@ class CUDABackend:
 
     def ptx(self):
         """PTX of the compiled pass kernel (to check for float64 instructions)."""
-        return "\n".join(self.kernel.inspect_asm().values())
+        mega = "\n".join(self.kernel.inspect_asm().values())
+        if self.wavefront is not None:
+            return self.wavefront.ptx() + "\n" + mega
+        return mega
 
     def registers(self):
         """Registers per thread of the compiled pass kernel(s)."""
-        return {str(k): v for k, v in self.kernel.get_regs_per_thread().items()}
+        regs = {str(k): v for k, v in self.kernel.get_regs_per_thread().items()}
+        if self.wavefront is not None:
+            if self.wave_min_paths == 0:    # the megakernel is not launched
+                regs = {}
+            regs.update(self.wavefront.registers())
+        return regs

@@ -21,6 +21,7 @@ light kind, then one shadow-ray-and-MIS tail, ``direct_light``), BSDF sampling
 """
 import functools
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -30,7 +31,10 @@ from .device import entry_marker, step_marker
 from .emitters import make_emitters
 from .layout import (AOV_ALBEDO, AOV_NORMAL, CAM_CONE, D_BSDF_LOBE, D_BSDF_U, D_BSDF_V,
                      D_FIRST_BOUNCE, D_LENS_U, D_LENS_V, D_LIGHT_SELECT, D_LIGHT_U, D_LIGHT_V,
-                     D_PIXEL_X, D_PIXEL_Y, D_RR, DIMS_PER_BOUNCE, P_BASE, P_METALLIC,
+                     D_PIXEL_X, D_PIXEL_Y, D_RR, DIMS_PER_BOUNCE, HIT_B1, HIT_B2, HIT_T,
+                     P_BASE, P_METALLIC, PATH_BETA, PATH_BOUNCE, PATH_BOUNCE_RAYS,
+                     PATH_CONE, PATH_D, PATH_O, PATH_PDF_PREV, PATH_RADIANCE,
+                     PATH_SHADOW_RAYS, PATH_SKIP,
                      P_ROUGHNESS, P_TRANSMISSION, STAT_BOUNCE_RAYS, STAT_NONFINITE,
                      STAT_SHADOW_RAYS, TRI_E1, TRI_E2, TRI_V0, Features, SceneArrays,
                      specialise)
@@ -44,7 +48,7 @@ from .vec import (add, cross, dot, load3, madd, max_comp, mul, neg, normalize, s
                   to_world)
 from .warps import power_heuristic
 
-__all__ = ["Features", "SceneArrays", "make_render_pixel"]
+__all__ = ["Features", "SceneArrays", "make_render_pixel", "make_wavefront"]
 
 
 # Auxiliary images for the denoiser (aov_pixel): a surface counts as specular, and the
@@ -211,9 +215,17 @@ def make_kernels(features, target="cpu"):
         bounce, cone), the shadow rays traced, the bounce rays made (1 once a BSDF sample
         made the next ray, counted even where Russian roulette then ends the path) and
         whether the path goes on."""
-        n_shadow_rays = 0
         t, tri, b1, b2 = trace_closest(o, d, INF, skip, scene.tri_v, scene.bvh_box,
                                        scene.bvh_child, stack)
+        return shade_hit(o, d, beta, radiance, pdf_prev, skip, bounce, cone, spread, state,
+                         max_bounces, rr_depth, scene, stack, t, tri, b1, b2)
+
+    @step
+    def shade_hit(o, d, beta, radiance, pdf_prev, skip, bounce, cone, spread, state,
+                  max_bounces, rr_depth, scene, stack, t, tri, b1, b2):
+        """path_vertex after its closest-hit query (t, tri, b1, b2: trace_closest's answer
+        for the ray (o, d)); the wavefront kernels run the two halves apart."""
+        n_shadow_rays = 0
         if tri < 0:
             if ANY_ENVIRONMENT:
                 le, weight = escaped(scene.env, scene.env_img, scene.env_pdf,
@@ -273,7 +285,8 @@ def make_kernels(features, target="cpu"):
             draw(state, dims, dim + D_BSDF_LOBE), draw(state, dims, dim + D_BSDF_U),
             draw(state, dims, dim + D_BSDF_V))
         if not (pdf_bsdf > ZERO):
-            return o, d, beta, radiance, pdf_prev, skip, bounce, cone, n_shadow_rays, 0, False
+            return (o, d, beta, radiance, pdf_prev, skip, bounce, cone, n_shadow_rays, 0,
+                    False)
         beta = mul(beta, weight)
         pdf_prev = pdf_bsdf
         o = leave(p, ng, wi, origin)
@@ -281,7 +294,9 @@ def make_kernels(features, target="cpu"):
         skip = own_skip(tri, ng_tri, ng, wi)
         bounce += 1
         beta, alive = russian_roulette(beta, bounce, rr_depth, state, dim)
-        return o, d, beta, radiance, pdf_prev, skip, bounce, cone, n_shadow_rays, 1, alive
+        return (o, d, beta, radiance, pdf_prev, skip, bounce, cone, n_shadow_rays, 1,
+                alive)
+
 
     @step
     def add_sample(r, g, b, n_bad, radiance):
@@ -530,4 +545,152 @@ def make_kernels(features, target="cpu"):
             out[py, px, AOV_ALBEDO + c] = acc[c] * inv
             out[py, px, AOV_NORMAL + c] = nacc[c] * inv
 
-    return render_pixel, aov_pixel, render_pixel_nested
+    # ---- The wavefront form: the same path, one vertex per kernel launch ----
+    # A pass's paths (pixel, sample) are numbered path = (sample - sample_start) * pixels
+    # + pixel, so that a warp's lanes hold nearby pixels of one sample. Their state lives
+    # in paths_f / paths_i between launches (layout PATH_*); a launch runs one step for the
+    # paths of a queue (the backend's loop: wave_start, then wave_extend and wave_shade
+    # per vertex while paths are alive, then wave_film). Every path draws the numbers
+    # render_sample draws and takes the same steps, and wave_film adds a pixel's samples
+    # in sample order: the image is render_pixel_nested's.
+
+    @step
+    def load_path(paths_f, paths_i, path):
+        o = (paths_f[PATH_O, path], paths_f[PATH_O + 1, path], paths_f[PATH_O + 2, path])
+        d = (paths_f[PATH_D, path], paths_f[PATH_D + 1, path], paths_f[PATH_D + 2, path])
+        beta = (paths_f[PATH_BETA, path], paths_f[PATH_BETA + 1, path],
+                paths_f[PATH_BETA + 2, path])
+        radiance = (paths_f[PATH_RADIANCE, path], paths_f[PATH_RADIANCE + 1, path],
+                    paths_f[PATH_RADIANCE + 2, path])
+        return (o, d, beta, radiance, paths_f[PATH_PDF_PREV, path], paths_i[PATH_SKIP, path],
+                paths_i[PATH_BOUNCE, path], paths_f[PATH_CONE, path])
+
+    @step
+    def store_path(paths_f, paths_i, path, o, d, beta, radiance, pdf_prev, skip, bounce,
+                   cone):
+        for c in range(3):
+            paths_f[PATH_O + c, path] = o[c]
+            paths_f[PATH_D + c, path] = d[c]
+            paths_f[PATH_BETA + c, path] = beta[c]
+            paths_f[PATH_RADIANCE + c, path] = radiance[c]
+        paths_f[PATH_PDF_PREV, path] = pdf_prev
+        paths_f[PATH_CONE, path] = cone
+        paths_i[PATH_SKIP, path] = skip
+        paths_i[PATH_BOUNCE, path] = bounce
+
+    @entry
+    def wave_start(path, sample_start, width, height, seed, scene, paths_f, paths_i):
+        """Path ``path``'s camera ray (see the numbering above)."""
+        pixels = width * height
+        pixel = path % pixels
+        px = pixel % width
+        py = pixel // width
+        state = start_path(pixel, sample_start + path // pixels, seed)
+        o, d, beta, radiance, pdf_prev, skip, bounce, cone = start_camera_path(
+            scene.cam, px, py, state, width, height)
+        store_path(paths_f, paths_i, path, o, d, beta, radiance, pdf_prev, skip, bounce, cone)
+        paths_i[PATH_BOUNCE_RAYS, path] = 0
+        paths_i[PATH_SHADOW_RAYS, path] = 0
+
+    @entry
+    def wave_extend(path, slot, scene, paths_f, paths_i, hits_f, hits_i, stack):
+        """The closest hit of path ``path``'s ray into slot ``slot`` of the hit arrays."""
+        o = (paths_f[PATH_O, path], paths_f[PATH_O + 1, path], paths_f[PATH_O + 2, path])
+        d = (paths_f[PATH_D, path], paths_f[PATH_D + 1, path], paths_f[PATH_D + 2, path])
+        t, tri, b1, b2 = trace_closest(o, d, INF, paths_i[PATH_SKIP, path], scene.tri_v,
+                                       scene.bvh_box, scene.bvh_child, stack)
+        hits_f[HIT_T, slot] = t
+        hits_f[HIT_B1, slot] = b1
+        hits_f[HIT_B2, slot] = b2
+        hits_i[slot] = tri
+
+    @entry
+    def wave_shade(path, slot, sample_start, width, height, seed, max_bounces, rr_depth,
+                   scene, paths_f, paths_i, hits_f, hits_i, stack):
+        """The rest of path ``path``'s vertex (shade_hit) at the hit in ``slot``: whether
+        the path goes on."""
+        pixels = width * height
+        state = start_path(path % pixels, sample_start + path // pixels, seed)
+        spread = ZERO
+        if MIPMAPS:
+            spread = scene.cam[CAM_CONE]
+        o, d, beta, radiance, pdf_prev, skip, bounce, cone = load_path(paths_f, paths_i, path)
+        (o, d, beta, radiance, pdf_prev, skip, bounce, cone, shadow_rays, bounce_rays,
+         alive) = shade_hit(o, d, beta, radiance, pdf_prev, skip, bounce, cone, spread, state,
+                            max_bounces, rr_depth, scene, stack, hits_f[HIT_T, slot],
+                            hits_i[slot], hits_f[HIT_B1, slot], hits_f[HIT_B2, slot])
+        store_path(paths_f, paths_i, path, o, d, beta, radiance, pdf_prev, skip, bounce, cone)
+        paths_i[PATH_BOUNCE_RAYS, path] += bounce_rays
+        paths_i[PATH_SHADOW_RAYS, path] += shadow_rays
+        return alive
+
+    @entry
+    def wave_finish(path, sample_start, width, height, seed, max_bounces, rr_depth, scene,
+                    paths_f, paths_i, stack):
+        """Path ``path`` from its stored ray to its end (path_vertex in a loop, as
+        render_pixel's megakernel does): the wavefront's last launch, for the few long
+        paths that outlive its first vertices."""
+        pixels = width * height
+        state = start_path(path % pixels, sample_start + path // pixels, seed)
+        spread = ZERO
+        if MIPMAPS:
+            spread = scene.cam[CAM_CONE]
+        o, d, beta, radiance, pdf_prev, skip, bounce, cone = load_path(paths_f, paths_i, path)
+        n_bounce_rays = 0
+        n_shadow_rays = 0
+        alive = True
+        while alive:
+            (o, d, beta, radiance, pdf_prev, skip, bounce, cone, shadow_rays, bounce_rays,
+             alive) = path_vertex(o, d, beta, radiance, pdf_prev, skip, bounce, cone, spread,
+                                  state, max_bounces, rr_depth, scene, stack)
+            n_shadow_rays += shadow_rays
+            n_bounce_rays += bounce_rays
+        for c in range(3):
+            paths_f[PATH_RADIANCE + c, path] = radiance[c]
+        paths_i[PATH_BOUNCE_RAYS, path] += n_bounce_rays
+        paths_i[PATH_SHADOW_RAYS, path] += n_shadow_rays
+
+    @entry
+    def wave_film(px, py, n_samples, paths_f, paths_i, out, stats, first):
+        """Add pixel (px, py)'s paths of the launch (n_samples samples, in sample order)
+        to out[py, px] and stats[py, px] (layout STAT_*): from zero where ``first``, else
+        to what an earlier launch of the pass left there."""
+        width = out.shape[1]
+        pixel = py * width + px
+        pixels = width * out.shape[0]
+        if first:
+            r, g, b = ZERO, ZERO, ZERO
+            n_bounce = 0
+            n_shadow = 0
+            n_bad = 0
+        else:
+            r, g, b = out[py, px, 0], out[py, px, 1], out[py, px, 2]
+            n_bounce = stats[py, px, STAT_BOUNCE_RAYS]
+            n_shadow = stats[py, px, STAT_SHADOW_RAYS]
+            n_bad = stats[py, px, STAT_NONFINITE]
+        for s in range(n_samples):
+            path = s * pixels + pixel
+            r, g, b, n_bad = add_sample(r, g, b, n_bad, (
+                paths_f[PATH_RADIANCE, path], paths_f[PATH_RADIANCE + 1, path],
+                paths_f[PATH_RADIANCE + 2, path]))
+            n_bounce += paths_i[PATH_BOUNCE_RAYS, path]
+            n_shadow += paths_i[PATH_SHADOW_RAYS, path]
+        store_pixel(out, stats, px, py, r, g, b, n_bounce, n_shadow, n_bad)
+
+    wavefront = Wavefront(wave_start, wave_extend, wave_shade, wave_finish, wave_film)
+    return render_pixel, aov_pixel, render_pixel_nested, wavefront
+
+
+class Wavefront(NamedTuple):
+    """The entries of the wavefront form of the path tracer (make_wavefront)."""
+    start: object
+    extend: object
+    shade: object
+    finish: object
+    film: object
+
+
+@functools.lru_cache(maxsize=None)
+def make_wavefront(features, target="cuda"):
+    """The wavefront entries (:class:`Wavefront`) for scenes with ``features``."""
+    return make_kernels(features, target)[3]

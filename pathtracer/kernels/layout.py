@@ -221,6 +221,26 @@ STAT_SHADOW_RAYS = 1
 STAT_NONFINITE = 2
 STATS_WIDTH = 3
 
+# ---- Paths under way in the wavefront kernels: float32 (PATH_F_WIDTH, N), int32 --------------
+# (PATH_I_WIDTH, N), a row per field so that a warp's lanes (consecutive paths) read
+# consecutive words; the closest hits of a queue: float32 (HIT_F_WIDTH, N), int32 (N,)
+PATH_O = 0            # xyz
+PATH_D = 3            # xyz
+PATH_BETA = 6         # rgb
+PATH_RADIANCE = 9     # rgb
+PATH_PDF_PREV = 12
+PATH_CONE = 13
+PATH_F_WIDTH = 14
+PATH_SKIP = 0
+PATH_BOUNCE = 1
+PATH_BOUNCE_RAYS = 2
+PATH_SHADOW_RAYS = 3
+PATH_I_WIDTH = 4
+HIT_T = 0
+HIT_B1 = 1
+HIT_B2 = 2
+HIT_F_WIDTH = 3
+
 # ---- Auxiliary images for the denoiser: aovs, float32 (H, W, AOV_WIDTH) -----------------------
 AOV_ALBEDO = 0        # rgb
 AOV_NORMAL = 3        # xyz, world space
