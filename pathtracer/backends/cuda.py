@@ -73,8 +73,9 @@ WAVE_MIN_PATHS = 1 << 21
 def wavefront_for(features):
     """Whether scenes with ``features`` render with the wavefront kernels
     (backends.wavefront) rather than the megakernel: those with an HDRI, whose warps
-    diverge most (H100, 2026-11-24, bench.gpu_launch: bunny-studio and sun +4-5 %); not the
-    others (the Cornell box, whose megakernel regenerates paths: -18 to -27 %)."""
+    diverge most (H100, 2026-11-24, bench.gpu_launch: bunny-studio 1.21-1.23x, sun
+    1.10-1.19x); not the others (the Cornell box, whose megakernel regenerates paths, lost
+    18-27 % to the wavefront without its miss queue)."""
     return specialise(features).env_map
 # fast=True: NVVM's approximate division and square root and flushed denormals (ftz=1,
 # prec_div=0, prec_sqrt=0, fma=1) and LLVM's fast-math flags except nnan and ninf: the
@@ -411,6 +412,7 @@ class CUDABackend:
         """Registers per thread of the compiled pass kernel(s)."""
         regs = {str(k): v for k, v in self.kernel.get_regs_per_thread().items()}
         if self.wavefront is not None:
+            regs = {"megakernel": v for v in regs.values()}
             if self.wave_min_paths == 0:    # the megakernel is not launched
                 regs = {}
             regs.update(self.wavefront.registers())

@@ -4,23 +4,25 @@ The megakernel (``backends.cuda.pass_kernel``) runs each thread's paths from the
 their end, so a warp's lanes spread over every stage of a path at once (traversal, the
 principled lobes, the sky's tables) and wait for the warp's longest path: 8.7 of 32 lanes
 active and instruction fetch the top stall on the HDRI scenes (Nsight Compute,
-docs/benchmarks.md). Here (Laine, Karras and Aila 2013, "Megakernels considered harmful";
-pbrt-v4's GPU integrator) a pass's paths are numbered (``kernels.integrator``'s wavefront
-entries), their state is kept in arrays, and each vertex is two launches over a queue of
-the paths still alive: ``extend`` (the closest hit; a small kernel) and ``shade`` (the
-emitter reached, next-event estimation with its shadow ray, the BSDF sample, Russian
-roulette; the paths that go on are appended to the next vertex's queue). A last kernel adds
-each pixel's paths in sample order, so the image is ``render_pixel_nested``'s whatever
-order the queues take.
+docs/benchmarks.md). Here (Laine, Karras and Aila 2013, "Megakernels considered
+harmful"; pbrt-v4's GPU integrator) a pass's paths are numbered (``kernels.integrator``'s
+wavefront entries), their state is kept in arrays, and each vertex is launches over queues: ``extend`` (the closest
+hit; the paths that hit a surface make the hit queue, the others the miss queue), ``miss``
+(the sky's radiance for the rays that left) and ``shade`` (for the hits: the emitter
+reached, next-event estimation with its shadow ray, the BSDF sample, Russian roulette; the
+paths that go on make the next vertex's queue). A last kernel adds each pixel's paths in
+sample order, so the image is ``render_pixel_nested``'s whatever order the queues take.
 
-Only the first WAVE_LEVELS vertices are launched apart: the few paths alive after them
-(bunny-studio: 5 % of the camera paths after three vertices) are run to their ends by one
-launch of the megakernel's loop (``finish``), since launching each of their vertices apart
-cost more than it saved (every vertex apart: bunny-studio 0.81-0.86x the megakernel's
-paths/s, three: 1.05x). Shadow rays traced in launches of their own were measured too and
-took the gain back (bunny-studio 1024x768: 451.0 against the megakernel's 451.3 M paths/s);
-so was the first vertex run in the camera rays' launch (-2 to -4 % at 1024x768). H100, 2026-11-24;
-docs/benchmarks.md, "The wavefront kernels".
+Most bounce rays leave the scene (bunny-studio's second vertex: 3.77M of 4.85M), so the
+miss queue is what pays: in one shading kernel their lanes idled beside the few lanes
+shading a surface (with it: bunny-studio 1.21-1.22x the megakernel's paths/s, the sun
+1.10-1.16x; without it 1.02-1.05x). Only the first WAVE_LEVELS vertices are launched apart:
+the few paths alive after them (bunny-studio: 5 % of the camera paths after three) run to
+their ends in one launch of the megakernel's loop (``finish``); launching each of their
+vertices apart cost more than it saved (every vertex apart: 0.81-0.86x the megakernel).
+Shadow rays traced in launches of their own took the gain back, and the first vertex run
+in the camera rays' launch lost 2-4 %. H100, 2026-11-24; docs/benchmarks.md, "The
+wavefront kernels".
 
 Queues are appended with one atomic add per warp (a ballot of the lanes that append); a
 launch loops over its queue with a fixed grid, reading the queue's length on the GPU, so
@@ -43,8 +45,8 @@ from ..kernels.layout import HIT_F_WIDTH, PATH_F_WIDTH, PATH_I_WIDTH
 # least).
 MAX_PATHS = 1 << 23
 # GPU bytes per path: its state (PATH_F_WIDTH floats, PATH_I_WIDTH ints), its hit
-# (HIT_F_WIDTH floats, a triangle), its place in the two queues
-PATH_BYTES = 4 * (PATH_F_WIDTH + PATH_I_WIDTH + HIT_F_WIDTH + 1 + 2)
+# (HIT_F_WIDTH floats, a triangle), its place in the three queues
+PATH_BYTES = 4 * (PATH_F_WIDTH + PATH_I_WIDTH + HIT_F_WIDTH + 1 + 3)
 # Threads of the extend and shade launches, each looping over its share of the queue: a few
 # waves of a large GPU's resident threads (H100/H200: 132 SMs x 2,048 at most).
 WAVE_THREADS = 1 << 20
@@ -58,6 +60,9 @@ CHECK_EVERY = 8
 # cost two launches per vertex. None: every vertex apart.
 WAVE_LEVELS = 3
 FINISH_THREADS = 1 << 20
+# The queue lengths of vertex k: counts[3 k + PATHS] paths to trace, of which
+# counts[3 k + HITS] hit a surface and counts[3 k + MISSES] left the scene.
+PATHS, HITS, MISSES = 0, 1, 2
 
 
 def _make_push():
@@ -95,11 +100,11 @@ def _make_push():
 
 @functools.lru_cache(maxsize=None)
 def wavefront_kernels(features, max_registers=None, fast=False):
-    """(start, extend, shade, finish, film, zero) kernels for scenes with ``features``;
+    """(start, extend, miss, shade, finish, film, zero) kernels for scenes with ``features``;
     ``max_registers`` and ``fast`` apply to the shading kernel (see backends.cuda)."""
     from .cuda import FAST_MATH_FLAGS
     W = make_wavefront(features, "cuda")
-    wave_start, wave_extend, wave_shade, wave_finish, wave_film = W
+    wave_start, wave_trace, store_hit, wave_miss, wave_shade, wave_finish, wave_film = W
     push = _make_push()
     fastmath = set(FAST_MATH_FLAGS) if fast else False
     sim = config.ENABLE_CUDASIM
@@ -120,24 +125,47 @@ def wavefront_kernels(features, max_registers=None, fast=False):
                 wave_start(path, sample_start, width, height, seed, scene, paths_f, paths_i)
                 pixel = path % (width * height)
                 append = active[pixel // width, pixel % width] != 0
-            push(queue, counts, 0, path, append)
+            push(queue, counts, PATHS, path, append)
 
     @cuda.jit(cache=jit_cache(), **plain_options)
-    def extend(queue, counts, level, scene, paths_f, paths_i, hits_f, hits_i):
-        """The closest hits of the paths in queue ``level`` (counts[level] of them)."""
-        n = counts[level]
+    def extend(queue, counts, level, scene, paths_f, paths_i, hits_f, hits_i, hit_queue,
+               miss_queue):
+        """The closest hits of the paths in queue ``level`` (counts[PATHS + 3 level] of
+        them): the paths that hit a surface make the hit queue (their hits in its slots),
+        the others the miss queue."""
+        n = counts[PATHS + 3 * level]
+        stride = cuda.gridsize(1)
+        begin = cuda.grid(1)
         stack = cuda.local.array(STACK_SIZE, np.int32)
+        for k in range((n + stride - 1) // stride):
+            slot = begin + k * stride
+            path = 0
+            t = b1 = b2 = np.float32(0)
+            tri = -1
+            valid = slot < n
+            if valid:
+                path = queue[slot]
+                t, tri, b1, b2 = wave_trace(path, scene, paths_f, paths_i, stack)
+            hit_slot = push(hit_queue, counts, HITS + 3 * level, path, valid and tri >= 0)
+            push(miss_queue, counts, MISSES + 3 * level, path, valid and tri < 0)
+            if hit_slot >= 0:
+                store_hit(hits_f, hits_i, hit_slot, t, tri, b1, b2)
+
+    @cuda.jit(cache=jit_cache(), **plain_options)
+    def miss(miss_queue, counts, level, scene, paths_f, paths_i):
+        """The ends of the paths in miss queue ``level``."""
+        n = counts[MISSES + 3 * level]
         for slot in range(cuda.grid(1), n, cuda.gridsize(1)):
-            wave_extend(queue[slot], slot, scene, paths_f, paths_i, hits_f, hits_i, stack)
+            wave_miss(miss_queue[slot], scene, paths_f, paths_i)
 
     @cuda.jit(cache=jit_cache(), **shade_options)
-    def shade(queue, next_queue, counts, level, sample_start, width, height, seed,
+    def shade(hit_queue, next_queue, counts, level, sample_start, width, height, seed,
               max_bounces, rr_depth, scene, paths_f, paths_i, hits_f, hits_i):
-        """The rest of the vertex of each path in queue ``level``; those that go on make
-        queue ``level`` + 1."""
-        if options_key < 0:
+        """The rest of the vertex of each path in hit queue ``level``; those that go on
+        make queue ``level`` + 1."""
+        if options_key < 0:     # never: makes the options part of the cache key
             return
-        n = counts[level]
+        n = counts[HITS + 3 * level]
         stride = cuda.gridsize(1)
         begin = cuda.grid(1)
         stack = cuda.local.array(STACK_SIZE, np.int32)
@@ -146,11 +174,11 @@ def wavefront_kernels(features, max_registers=None, fast=False):
             path = 0
             alive = False
             if slot < n:
-                path = queue[slot]
+                path = hit_queue[slot]
                 alive = wave_shade(path, slot, sample_start, width, height, seed,
                                    max_bounces, rr_depth, scene, paths_f, paths_i, hits_f,
                                    hits_i, stack)
-            push(next_queue, counts, level + 1, path, alive)
+            push(next_queue, counts, PATHS + 3 * (level + 1), path, alive)
 
     @cuda.jit(cache=jit_cache(), **shade_options)
     def finish(queue, counts, level, sample_start, width, height, seed, max_bounces,
@@ -158,7 +186,7 @@ def wavefront_kernels(features, max_registers=None, fast=False):
         """The paths of queue ``level`` to their ends."""
         if options_key < 0:
             return
-        n = counts[level]
+        n = counts[PATHS + 3 * level]
         stack = cuda.local.array(STACK_SIZE, np.int32)
         for slot in range(cuda.grid(1), n, cuda.gridsize(1)):
             wave_finish(queue[slot], sample_start, width, height, seed, max_bounces,
@@ -176,7 +204,7 @@ def wavefront_kernels(features, max_registers=None, fast=False):
         if i < counts.shape[0]:
             counts[i] = 0
 
-    return start, extend, shade, finish, film, zero
+    return start, extend, miss, shade, finish, film, zero
 
 
 def _free_bytes():
@@ -245,6 +273,7 @@ class WavefrontLaunch:
                              cuda.device_array((HIT_F_WIDTH, n_paths), np.float32),
                              cuda.device_array(n_paths, np.int32),
                              cuda.device_array(n_paths, np.int32),
+                             cuda.device_array(n_paths, np.int32),
                              cuda.device_array(n_paths, np.int32))
             self._capacity = n_paths
         if self._counts is None or self._counts.shape[0] < levels:
@@ -258,21 +287,22 @@ class WavefrontLaunch:
     def launch(self, d_scene, d_out, d_stats, d_active, sample_start, n_samples, seed,
                max_bounces, rr_depth):
         """A pass of n_samples per pixel into d_out / d_stats, without waiting."""
-        start, extend, shade, finish, film, zero = self.kernels
+        start, extend, miss, shade, finish, film, zero = self.kernels
         w, h = self.width, self.height
         pixels = w * h
         chunks = max(1, -(-n_samples * pixels // self.max_paths))
         per_chunk = max(1, -(-n_samples // chunks))
-        self._ensure(per_chunk * pixels, max_bounces + 2)
-        paths_f, paths_i, hits_f, hits_i, queue_a, queue_b = self._buffers
-        queues = (queue_a, queue_b)     # queue k: the paths at their vertex k
-        counts = self._counts           # counts[k]: queue k's length
+        self._ensure(per_chunk * pixels, 3 * (max_bounces + 2))
+        # the queues: paths to trace (the next vertex's, written by shade once extend has
+        # read them), those that hit a surface, those that left the scene
+        paths_f, paths_i, hits_f, hits_i, queue, hit_queue, miss_queue = self._buffers
+        counts = self._counts
         film_grid = ((w + self.block[0] - 1) // self.block[0],
                      (h + self.block[1] - 1) // self.block[1])
         if n_samples <= 0:      # an empty pass: zeros, as the megakernel leaves
             film[film_grid, self.block](0, paths_f, paths_i, d_out, d_stats, True)
             return
-        # vertices [level0, levels) in launches of their own, then one launch to the ends
+        # vertices [0, levels) in launches of their own, then one launch to the ends
         levels = max_bounces + 1 if self.wave_levels is None else \
             min(self.wave_levels, max_bounces + 1)
         for c0 in range(0, n_samples, per_chunk):
@@ -282,24 +312,26 @@ class WavefrontLaunch:
             zero[(counts.shape[0] + BLOCK - 1) // BLOCK, BLOCK](counts)
             grid = self._grid(n_paths)
             self._run("start", None, start, (grid, BLOCK), n_paths, s0, w, h, seed, d_scene,
-                      paths_f, paths_i, d_active, queues[0], counts)
+                      paths_f, paths_i, d_active, queue, counts)
             for level in range(levels):
-                q, q_next = queues[level % 2], queues[(level + 1) % 2]
-                self._run("extend", level, extend, (grid, BLOCK), q, counts, level, d_scene,
-                          paths_f, paths_i, hits_f, hits_i)
-                self._run("shade", level, shade, (grid, BLOCK), q, q_next, counts, level, s0,
-                          w, h, seed, max_bounces, rr_depth, d_scene, paths_f, paths_i,
-                          hits_f, hits_i)
+                self._run("extend", level, extend, (grid, BLOCK), queue, counts, level,
+                          d_scene, paths_f, paths_i, hits_f, hits_i, hit_queue, miss_queue)
+                self._run("miss", level, miss, (grid, BLOCK), miss_queue, counts, level,
+                          d_scene, paths_f, paths_i)
+                self._run("shade", level, shade, (grid, BLOCK), hit_queue, queue, counts,
+                          level, s0, w, h, seed, max_bounces, rr_depth, d_scene, paths_f,
+                          paths_i, hits_f, hits_i)
                 if self.wave_levels is None and level % CHECK_EVERY == CHECK_EVERY - 1 \
                         and level < max_bounces:
-                    counts[level + 1:level + 2].copy_to_host(self._count_host)
+                    k = PATHS + 3 * (level + 1)
+                    counts[k:k + 1].copy_to_host(self._count_host)
                     if self._count_host[0] == 0:
                         break
             if levels < max_bounces + 1:
                 self._run("finish", levels, finish,
                           (self._grid(min(n_paths, self.finish_threads)), BLOCK),
-                          queues[levels % 2], counts, levels, s0, w, h, seed, max_bounces,
-                          rr_depth, d_scene, paths_f, paths_i)
+                          queue, counts, levels, s0, w, h, seed, max_bounces, rr_depth,
+                          d_scene, paths_f, paths_i)
             self._run("film", None, film, (film_grid, self.block), ns, paths_f, paths_i,
                       d_out, d_stats, c0 == 0)
 
@@ -316,7 +348,7 @@ class WavefrontLaunch:
 
     def registers(self):
         """Registers per thread of the compiled kernels, by name."""
-        names = ("start", "extend", "shade", "finish", "film")
+        names = ("start", "extend", "miss", "shade", "finish", "film")
         out = {}
         for name, k in zip(names, self.kernels):
             for sig, regs in k.get_regs_per_thread().items():
@@ -324,4 +356,4 @@ class WavefrontLaunch:
         return out
 
     def ptx(self):
-        return "\n".join(p for k in self.kernels[:5] for p in k.inspect_asm().values())
+        return "\n".join(p for k in self.kernels[:6] for p in k.inspect_asm().values())

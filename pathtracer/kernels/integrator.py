@@ -578,6 +578,17 @@ def make_kernels(features, target="cpu"):
         paths_i[PATH_SKIP, path] = skip
         paths_i[PATH_BOUNCE, path] = bounce
 
+    @step
+    def resume_path(path, sample_start, width, height, seed, scene, paths_f, paths_i):
+        """Path ``path`` as a launch takes it up: its sampler state, the camera's cone
+        spread and its stored state (load_path)."""
+        pixels = width * height
+        state = start_path(path % pixels, sample_start + path // pixels, seed)
+        spread = ZERO
+        if MIPMAPS:
+            spread = scene.cam[CAM_CONE]
+        return state, spread, load_path(paths_f, paths_i, path)
+
     @entry
     def wave_start(path, sample_start, width, height, seed, scene, paths_f, paths_i):
         """Path ``path``'s camera ray (see the numbering above)."""
@@ -593,28 +604,42 @@ def make_kernels(features, target="cpu"):
         paths_i[PATH_SHADOW_RAYS, path] = 0
 
     @entry
-    def wave_extend(path, slot, scene, paths_f, paths_i, hits_f, hits_i, stack):
-        """The closest hit of path ``path``'s ray into slot ``slot`` of the hit arrays."""
+    def wave_trace(path, scene, paths_f, paths_i, stack):
+        """The closest hit (t, tri, b1, b2) of path ``path``'s ray (tri < 0: none)."""
         o = (paths_f[PATH_O, path], paths_f[PATH_O + 1, path], paths_f[PATH_O + 2, path])
         d = (paths_f[PATH_D, path], paths_f[PATH_D + 1, path], paths_f[PATH_D + 2, path])
-        t, tri, b1, b2 = trace_closest(o, d, INF, paths_i[PATH_SKIP, path], scene.tri_v,
-                                       scene.bvh_box, scene.bvh_child, stack)
+        return trace_closest(o, d, INF, paths_i[PATH_SKIP, path], scene.tri_v,
+                             scene.bvh_box, scene.bvh_child, stack)
+
+    @entry
+    def store_hit(hits_f, hits_i, slot, t, tri, b1, b2):
         hits_f[HIT_T, slot] = t
         hits_f[HIT_B1, slot] = b1
         hits_f[HIT_B2, slot] = b2
         hits_i[slot] = tri
 
     @entry
+    def wave_miss(path, scene, paths_f, paths_i):
+        """Path ``path``, whose ray left the scene: its end (shade_hit's first branch, the
+        environment's radiance MIS-weighted), apart from the paths that hit a surface, so
+        that their shading runs in full warps."""
+        if ANY_ENVIRONMENT:
+            d = (paths_f[PATH_D, path], paths_f[PATH_D + 1, path], paths_f[PATH_D + 2, path])
+            beta = (paths_f[PATH_BETA, path], paths_f[PATH_BETA + 1, path],
+                    paths_f[PATH_BETA + 2, path])
+            le, weight = escaped(scene.env, scene.env_img, scene.env_pdf, scene.env_info, d,
+                                 paths_f[PATH_PDF_PREV, path])
+            contribution = scale(mul(beta, le), weight)
+            for c in range(3):
+                paths_f[PATH_RADIANCE + c, path] += contribution[c]
+
+    @entry
     def wave_shade(path, slot, sample_start, width, height, seed, max_bounces, rr_depth,
                    scene, paths_f, paths_i, hits_f, hits_i, stack):
         """The rest of path ``path``'s vertex (shade_hit) at the hit in ``slot``: whether
         the path goes on."""
-        pixels = width * height
-        state = start_path(path % pixels, sample_start + path // pixels, seed)
-        spread = ZERO
-        if MIPMAPS:
-            spread = scene.cam[CAM_CONE]
-        o, d, beta, radiance, pdf_prev, skip, bounce, cone = load_path(paths_f, paths_i, path)
+        state, spread, (o, d, beta, radiance, pdf_prev, skip, bounce, cone) = resume_path(
+            path, sample_start, width, height, seed, scene, paths_f, paths_i)
         (o, d, beta, radiance, pdf_prev, skip, bounce, cone, shadow_rays, bounce_rays,
          alive) = shade_hit(o, d, beta, radiance, pdf_prev, skip, bounce, cone, spread, state,
                             max_bounces, rr_depth, scene, stack, hits_f[HIT_T, slot],
@@ -630,12 +655,8 @@ def make_kernels(features, target="cpu"):
         """Path ``path`` from its stored ray to its end (path_vertex in a loop, as
         render_pixel's megakernel does): the wavefront's last launch, for the few long
         paths that outlive its first vertices."""
-        pixels = width * height
-        state = start_path(path % pixels, sample_start + path // pixels, seed)
-        spread = ZERO
-        if MIPMAPS:
-            spread = scene.cam[CAM_CONE]
-        o, d, beta, radiance, pdf_prev, skip, bounce, cone = load_path(paths_f, paths_i, path)
+        state, spread, (o, d, beta, radiance, pdf_prev, skip, bounce, cone) = resume_path(
+            path, sample_start, width, height, seed, scene, paths_f, paths_i)
         n_bounce_rays = 0
         n_shadow_rays = 0
         alive = True
@@ -677,14 +698,17 @@ def make_kernels(features, target="cpu"):
             n_shadow += paths_i[PATH_SHADOW_RAYS, path]
         store_pixel(out, stats, px, py, r, g, b, n_bounce, n_shadow, n_bad)
 
-    wavefront = Wavefront(wave_start, wave_extend, wave_shade, wave_finish, wave_film)
+    wavefront = Wavefront(wave_start, wave_trace, store_hit, wave_miss, wave_shade,
+                          wave_finish, wave_film)
     return render_pixel, aov_pixel, render_pixel_nested, wavefront
 
 
 class Wavefront(NamedTuple):
     """The entries of the wavefront form of the path tracer (make_wavefront)."""
     start: object
-    extend: object
+    trace: object
+    store_hit: object
+    miss: object
     shade: object
     finish: object
     film: object
