@@ -6,17 +6,17 @@ principled lobes, the sky's tables) and wait for the warp's longest path: 8.7 of
 active and instruction fetch the top stall on the HDRI scenes (Nsight Compute,
 docs/benchmarks.md). Here (Laine, Karras and Aila 2013, "Megakernels considered
 harmful"; pbrt-v4's GPU integrator) a pass's paths are numbered (``kernels.integrator``'s
-wavefront entries), their state is kept in arrays, and each vertex is launches over queues: ``extend`` (the closest
-hit; the paths that hit a surface make the hit queue, the others the miss queue), ``miss``
-(the sky's radiance for the rays that left) and ``shade`` (for the hits: the emitter
-reached, next-event estimation with its shadow ray, the BSDF sample, Russian roulette; the
-paths that go on make the next vertex's queue). A last kernel adds each pixel's paths in
+wavefront entries), their state is kept in arrays, and each vertex is launches over
+queues: ``extend`` (the closest hit; the paths that hit a surface make the hit queue, the
+others the miss queue), ``miss`` (the sky's radiance for the rays that left) and ``shade``
+(for the hits: the emitter reached, next-event estimation with its shadow ray, the BSDF
+sample, Russian roulette; the paths that go on make the next vertex's queue). A last kernel adds each pixel's paths in
 sample order, so the image is ``render_pixel_nested``'s whatever order the queues take.
 
 Most bounce rays leave the scene (bunny-studio's second vertex: 3.77M of 4.85M), so the
 miss queue is what pays: in one shading kernel their lanes idled beside the few lanes
-shading a surface (with it: bunny-studio 1.21-1.22x the megakernel's paths/s, the sun
-1.10-1.16x; without it 1.02-1.05x). Only the first WAVE_LEVELS vertices are launched apart:
+shading a surface (with it: bunny-studio 1.21-1.23x the megakernel's paths/s, the sun
+1.10-1.19x; without it 1.02-1.05x). Only the first WAVE_LEVELS vertices are launched apart:
 the few paths alive after them (bunny-studio: 5 % of the camera paths after three) run to
 their ends in one launch of the megakernel's loop (``finish``); launching each of their
 vertices apart cost more than it saved (every vertex apart: 0.81-0.86x the megakernel).
@@ -27,7 +27,7 @@ wavefront kernels".
 Queues are appended with one atomic add per warp (a ballot of the lanes that append); a
 launch loops over its queue with a fixed grid, reading the queue's length on the GPU, so
 the host never waits between launches. Only scenes with an HDRI render this way, and only
-passes of at least WAVE_MIN_PATHS paths (backends.cuda.wavefront_for).
+passes of at least backends.cuda.WAVE_MIN_PATHS paths (backends.cuda.wavefront_for).
 """
 import functools
 
