@@ -10,8 +10,9 @@ wavefront entries), their state is kept in arrays, and each vertex is launches o
 queues: ``extend`` (the closest hit; the paths that hit a surface make the hit queue, the
 others the miss queue), ``miss`` (the sky's radiance for the rays that left) and ``shade``
 (for the hits: the emitter reached, next-event estimation with its shadow ray, the BSDF
-sample, Russian roulette; the paths that go on make the next vertex's queue). A last kernel adds each pixel's paths in
-sample order, so the image is ``render_pixel_nested``'s whatever order the queues take.
+sample, Russian roulette; the paths that go on make the next vertex's queue). A last
+kernel adds each pixel's paths in sample order, so the image is ``render_pixel_nested``'s
+whatever order the queues take.
 
 Most bounce rays leave the scene (bunny-studio's second vertex: 3.77M of 4.85M), so the
 miss queue is what pays: in one shading kernel their lanes idled beside the few lanes
