@@ -58,6 +58,7 @@ VARIANTS = {
     # the wavefront kernels (backends.wavefront); t: the queue launches' threads
     "wave": dict(wavefront=True),
     "wave-r48": dict(wavefront=True, max_registers=48),
+    "wave-r56": dict(wavefront=True, max_registers=56),
     "wave-r64": dict(wavefront=True, max_registers=64),
     "wave-r96": dict(wavefront=True, max_registers=96),
     "wave-rnone": dict(wavefront=True, max_registers=None),

@@ -55,6 +55,10 @@ MAX_REGISTERS = 64
 # bench.gpu_launch r56 against the default, alternating: bunny-studio +2 %, sun +3-4 %, the
 # Cornell box -1.8 %).
 MAX_REGISTERS_ENV_MAP = 56
+# ... and the wavefront's shading kernels (backends.wavefront) 64: their warps wait on
+# memory more than on instruction fetch (H100, 2026-11-24, bench.gpu_launch, 64 against 56
+# alternating: bunny-studio +1.7 % at 1024x768 and +1 % at 256x192, the sun +1.4 % and 0).
+WAVE_MAX_REGISTERS = 64
 AUTO = "auto"
 
 
@@ -256,12 +260,15 @@ class CUDABackend:
     def __init__(self, scene, block=BLOCK, max_registers=AUTO, fast=True,
                  target_threads=None, regenerate=None, wavefront=AUTO):
         """max_registers: the pass kernel's register cap (None: no cap; AUTO:
-        max_registers_for the scene's features); wavefront: render with the wavefront
+        max_registers_for the scene's features, WAVE_MAX_REGISTERS for the wavefront's
+        shading kernels); wavefront: render with the wavefront
         kernels (backends.wavefront) instead of the megakernel (True, or a dict of
         WavefrontLaunch's options; AUTO: wavefront_for the scene's features)."""
         self.scene = scene
+        wave_registers = max_registers
         if max_registers == AUTO:
             max_registers = max_registers_for(scene.features)
+            wave_registers = WAVE_MAX_REGISTERS
         self.block = tuple(block)
         if regenerate is None:
             regenerate = regenerates(scene.features, "cuda")
@@ -282,7 +289,7 @@ class CUDABackend:
             if wave_threads is not None:
                 wave_options.setdefault("wave_threads", wave_threads)
             self.wavefront = WavefrontLaunch(scene.features, scene.width, scene.height,
-                                             max_registers, fast, self.block, **wave_options)
+                                             wave_registers, fast, self.block, **wave_options)
         self.kernel = pass_kernel(scene.features, max_registers, bool(fast), bool(regenerate))
         self.d_scene = _aligned(SceneArrays(*[cuda.to_device(a) for a in scene.arrays]))
         h, w = scene.height, scene.width
