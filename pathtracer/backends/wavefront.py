@@ -48,8 +48,8 @@ MAX_PATHS = 1 << 23
 # GPU bytes per path: its state (PATH_F_WIDTH floats, PATH_I_WIDTH ints), its hit
 # (HIT_F_WIDTH floats, a triangle), its place in the three queues
 PATH_BYTES = 4 * (PATH_F_WIDTH + PATH_I_WIDTH + HIT_F_WIDTH + 1 + 3)
-# Threads of the extend and shade launches, each looping over its share of the queue: a few
-# waves of a large GPU's resident threads (H100/H200: 132 SMs x 2,048 at most).
+# Threads of the queue launches, each looping over its share of the queue: a few waves of a
+# large GPU's resident threads (H100/H200: 132 SMs x 2,048 at most).
 WAVE_THREADS = 1 << 20
 BLOCK = 128                 # threads per block of the queue launches (a multiple of 32)
 FULL_MASK = 0xFFFFFFFF
@@ -58,7 +58,7 @@ FULL_MASK = 0xFFFFFFFF
 CHECK_EVERY = 8
 # Vertices run as separate launches; the paths alive after them are run to their ends by one
 # launch of the megakernel's loop (``finish``), so that the long tail of a few paths does not
-# cost two launches per vertex. None: every vertex apart.
+# cost three launches per vertex. None: every vertex apart.
 WAVE_LEVELS = 3
 FINISH_THREADS = 1 << 20
 # The queue lengths of vertex k: counts[3 k + PATHS] paths to trace, of which
@@ -209,9 +209,10 @@ def wavefront_kernels(features, max_registers=None, fast=False):
 
 
 def _free_bytes():
-    """The current GPU's free memory (the simulator: unlimited)."""
+    """The current GPU's free memory (the simulator, which renders tiny images in host
+    memory: room for 2^16 paths)."""
     if config.ENABLE_CUDASIM:
-        return 1 << 62
+        return (1 << 16) * 4 * PATH_BYTES
     return cuda.current_context().get_memory_info()[0]
 
 
