@@ -101,7 +101,7 @@ def time_ours(scene, options, spp, repeats, kernel_times=False):
         one()
         extra["kernel_s"] = b.wavefront.kernel_times()
         b.wavefront.events = None
-        extra["queue_lengths"] = [int(n) for n in b.wavefront._counts.copy_to_host()]
+        extra["queue_lengths"] = b.wavefront.queue_lengths()
     regs = b.registers()
     if len(regs) == 1:
         regs = list(regs.values())[0]

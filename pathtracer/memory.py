@@ -87,17 +87,25 @@ def check_film(width, height, backend="auto"):
                      "lower the resolution", only_if_present=backend == "auto")
 
 
-def check_device(nbytes, what, advice, only_if_present=True):
-    """The same check against the current CUDA device's free memory (skipped when no GPU
-    is in use)."""
+def device_free_bytes(only_if_present=False):
+    """The current CUDA device's free memory in bytes; None under the simulator, without a
+    driver or device, or (``only_if_present``) where numba finds no GPU."""
     if os.environ.get("NUMBA_ENABLE_CUDASIM") == "1":
-        return
+        return None
     try:
         from numba import cuda
         if only_if_present and not cuda.is_available():
-            return
-        free, _total = cuda.current_context().get_memory_info()
+            return None
+        return cuda.current_context().get_memory_info()[0]
     except Exception:   # no driver, no device: the backend reports that itself
+        return None
+
+
+def check_device(nbytes, what, advice, only_if_present=True):
+    """The same check against the current CUDA device's free memory (skipped when no GPU
+    is in use)."""
+    free = device_free_bytes(only_if_present)
+    if free is None:
         return
     if nbytes > free:
         raise InputError(f"{what} needs about {_gib(nbytes)} of GPU memory; the GPU has "

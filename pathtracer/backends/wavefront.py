@@ -36,6 +36,7 @@ import numpy as np
 from numba import config, cuda
 
 from .._cache import jit_cache
+from ..memory import device_free_bytes
 from ..kernels.constants import STACK_SIZE
 from ..kernels.integrator import make_wavefront
 from ..kernels.layout import HIT_F_WIDTH, PATH_F_WIDTH, PATH_I_WIDTH
@@ -210,10 +211,10 @@ def wavefront_kernels(features, max_registers=None, fast=False):
 
 def _free_bytes():
     """The current GPU's free memory (the simulator, which renders tiny images in host
-    memory: room for 2^16 paths)."""
+    memory: room for 2^16 paths; unknown: none)."""
     if config.ENABLE_CUDASIM:
         return (1 << 16) * 4 * PATH_BYTES
-    return cuda.current_context().get_memory_info()[0]
+    return device_free_bytes() or 0
 
 
 def fits(width, height):
@@ -347,6 +348,11 @@ class WavefrontLaunch:
         inactive = cuda.to_device(np.zeros((self.height, self.width), np.uint8))
         self.launch(d_scene, d_out, d_stats, inactive, 0, 1, 0,
                     1 + (self.wave_levels or 0), 0)
+
+    def queue_lengths(self):
+        """The queues' lengths of the last launch's last sample range (see PATHS; waits
+        for the GPU)."""
+        return [int(n) for n in self._counts.copy_to_host()]
 
     def registers(self):
         """Registers per thread of the compiled kernels, by name."""
