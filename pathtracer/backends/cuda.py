@@ -81,6 +81,8 @@ def wavefront_for(features):
     1.10-1.19x); not the others (the Cornell box, whose megakernel regenerates paths, lost
     18-27 % to the wavefront without its miss queue)."""
     return specialise(features).env_map
+
+
 # fast=True: NVVM's approximate division and square root and flushed denormals (ftz=1,
 # prec_div=0, prec_sqrt=0, fma=1) and LLVM's fast-math flags except nnan and ninf: the
 # kernels test for NaN and rely on IEEE infinities (the slab test divides by zero).
@@ -261,9 +263,9 @@ class CUDABackend:
                  target_threads=None, regenerate=None, wavefront=AUTO):
         """max_registers: the pass kernel's register cap (None: no cap; AUTO:
         max_registers_for the scene's features, WAVE_MAX_REGISTERS for the wavefront's
-        shading kernels); wavefront: render with the wavefront
-        kernels (backends.wavefront) instead of the megakernel (True, or a dict of
-        WavefrontLaunch's options; AUTO: wavefront_for the scene's features)."""
+        shading kernels); wavefront: render with the wavefront kernels (backends.wavefront)
+        instead of the megakernel (True, or a dict of WavefrontLaunch's options; AUTO:
+        wavefront_for the scene's features)."""
         self.scene = scene
         wave_registers = max_registers
         if max_registers == AUTO:

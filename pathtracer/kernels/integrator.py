@@ -549,10 +549,11 @@ def make_kernels(features, target="cpu"):
     # A pass's paths (pixel, sample) are numbered path = (sample - sample_start) * pixels
     # + pixel, so that a warp's lanes hold nearby pixels of one sample. Their state lives
     # in paths_f / paths_i between launches (layout PATH_*); a launch runs one step for the
-    # paths of a queue (the backend's loop: wave_start, then wave_extend and wave_shade
-    # per vertex while paths are alive, then wave_film). Every path draws the numbers
-    # render_sample draws and takes the same steps, and wave_film adds a pixel's samples
-    # in sample order: the image is render_pixel_nested's.
+    # paths of a queue (backends.wavefront: wave_start; per vertex wave_trace, then
+    # wave_miss for the rays that left and wave_shade for the hits; wave_finish for the
+    # paths still alive after the last vertex launched apart; wave_film). Every path draws
+    # the numbers render_sample draws and takes the same steps, and wave_film adds a
+    # pixel's samples in sample order: the image is render_pixel_nested's.
 
     @step
     def load_path(paths_f, paths_i, path):
