@@ -8,6 +8,7 @@ from numba import get_num_threads, njit, prange
 from .._cache import jit_cache
 
 from ..accel.wide import WIDE_STACK_SIZE, widen_bvh
+from ..kernels.device import FAST_MATH_FLAGS
 from ..kernels.layout import AOV_WIDTH
 from ..kernels.integrator import make_aov_pixel, make_render_pixel
 
@@ -42,7 +43,9 @@ def pass_kernel(features):
 
     # error_model='numpy': float division by zero gives inf/nan as on the GPU, not an exception.
     # nogil: other Python threads (the live preview's server) run while a pass renders.
-    @njit(parallel=True, nogil=True, cache=jit_cache(), error_model="numpy")
+    # fastmath: kernels.device.FAST_MATH_FLAGS (no nnan / ninf), as the GPU's default.
+    @njit(parallel=True, nogil=True, cache=jit_cache(), error_model="numpy",
+          fastmath=set(FAST_MATH_FLAGS))
     def render_pass(out, stats, sample_start, n_samples, seed, max_bounces, rr_depth, scene,
                     active, threads):
         height = out.shape[0]
@@ -68,7 +71,8 @@ def pass_kernel(features):
 def aov_kernel(features):
     aov_pixel = make_aov_pixel(features)
 
-    @njit(parallel=True, nogil=True, cache=jit_cache(), error_model="numpy")
+    @njit(parallel=True, nogil=True, cache=jit_cache(), error_model="numpy",
+          fastmath=set(FAST_MATH_FLAGS))
     def aov_pass(out, n_samples, seed, scene, threads):
         height = out.shape[0]
         rows_per = (height + threads - 1) // threads

@@ -31,6 +31,7 @@ if "NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS" not in os.environ:
 from .._cache import jit_cache
 
 from ..kernels.constants import STACK_SIZE
+from ..kernels.device import FAST_MATH_FLAGS
 from ..kernels.layout import AOV_WIDTH, specialise
 from ..kernels.integrator import SceneArrays, make_aov_pixel, make_render_pixel, regenerates
 
@@ -86,7 +87,7 @@ def wavefront_for(features):
 # fast=True: NVVM's approximate division and square root and flushed denormals (ftz=1,
 # prec_div=0, prec_sqrt=0, fma=1) and LLVM's fast-math flags except nnan and ninf: the
 # kernels test for NaN and rely on IEEE infinities (the slab test divides by zero).
-FAST_MATH_FLAGS = frozenset({"nsz", "arcp", "contract", "afn", "reassoc"})
+# (FAST_MATH_FLAGS: kernels.device)
 
 
 # Device functions called, not inlined, in the pass kernel. NVVM inlines every device

@@ -104,7 +104,7 @@ def _make_push():
 def wavefront_kernels(features, max_registers=None, fast=False):
     """(start, extend, miss, shade, finish, film, zero) kernels for scenes with ``features``;
     ``max_registers`` and ``fast`` apply to the shading kernel (see backends.cuda)."""
-    from .cuda import FAST_MATH_FLAGS
+    from ..kernels.device import FAST_MATH_FLAGS
     W = make_wavefront(features, "cuda")
     wave_start, wave_trace, store_hit, wave_miss, wave_shade, wave_finish, wave_film = W
     push = _make_push()

@@ -16,6 +16,15 @@ errors on H100), so for CUDA the steps are ordinary device functions.
 """
 from numba.extending import register_jitable
 
+# LLVM's fast-math flags that the compiled kernels use (CPU always; CUDA with fast=True,
+# its default): every flag but nnan and ninf, as the kernels test for NaN and rely on IEEE
+# infinities (the slab test divides by zero). On the CPU they let LLVM fuse multiplies and
+# adds (FMA) and reorder sums: the Cornell box and the textured scene +5 % camera paths/s on
+# 2 EPYC cores, bunny-studio and sun unchanged within the noise (docs/benchmarks.md).
+# They change rounding, not the random numbers: CPU, GPU and interpreted images agree to
+# rounding, not bit for bit.
+FAST_MATH_FLAGS = frozenset({"nsz", "arcp", "contract", "afn", "reassoc"})
+
 
 def device(fn):
     """Mark ``fn`` as device code shared by the CPU, CUDA and Python backends."""
