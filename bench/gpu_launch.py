@@ -20,6 +20,7 @@ SIZES = {
     "cornell-box": [((1024, 1024), 64)],
     "bunny-studio": [((256, 192), 64), ((1024, 768), 16)],
     "sun": [((256, 192), 64), ((1024, 768), 16)],
+    "textured": [((256, 192), 64), ((1024, 768), 16)],
     # the scaling scene (bench.scenes.mesh_desc: diffuse mesh, constant sky, 3 bounces)
     "bunny-mesh": [((1024, 1024), 16)],
     "dragon-1.6m": [((1024, 1024), 16)],

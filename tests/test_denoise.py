@@ -48,6 +48,18 @@ def test_albedo_and_normal_images(tmp_path):
     assert np.allclose(right[..., 3:], 0)
 
 
+def test_emitters_albedo_adds_their_radiance(tmp_path):
+    """An emitting wall: its albedo image is its base colour plus its radiance, clamped to
+    [0, 1] as the sky's is, so a light differs from a surface of the same colour around it
+    (the denoiser keeps the light's edge)."""
+    scene = load_scene(write_scene(tmp_path, _wall_scene(
+        {"type": "diffuse", "albedo": [0.2, 0.5, 0.8], "emission": [0.1, 0.15, 3.0],
+         "twoSided": True})))
+    aov = make_backend("cpu", scene).aovs(4, 0)
+    assert np.allclose(aov[4:-4, :8, :3], [0.3, 0.65, 1.0], atol=1e-5)
+    assert np.allclose(aov[4:-4, -6:, :3], [0.3, 0.3, 1.0], atol=1e-6)
+
+
 def test_specular_surfaces_are_looked_through(tmp_path):
     """A smooth metal mirror in front of the wall: the albedo image shows the wall seen in
     the mirror (or the sky), not the mirror's base colour; a rough metal is a surface."""
@@ -95,7 +107,8 @@ def test_command_writes_denoised_raw_and_aovs(tmp_path):
     # the plumbing (the denoiser's effect is measured above and in the benchmark)
     assert np.isfinite(den).all() and not np.array_equal(den, raw)
     assert abs(den.mean() - 0.875) < 0.05 and abs(raw.mean() - 0.875) < 0.05
-    assert np.allclose(read_image(str(tmp_path / "img-albedo.exr")), 0.5, atol=1e-6)
+    # (the shell emits: albedo 0.5 plus radiance 0.5)
+    assert np.allclose(read_image(str(tmp_path / "img-albedo.exr")), 1.0, atol=1e-6)
     assert "denoised" in r.stderr
 
 

@@ -472,7 +472,8 @@ def make_kernels(features, target="cpu"):
         surface that is not specular (AOV_SPECULAR_ROUGHNESS), the mean of n_samples camera
         rays (the sampler's own camera and BSDF numbers). A ray that leaves the scene gives
         the environment's radiance clamped to [0, 1] as albedo and a zero normal (Open Image
-        Denoise's convention for "no surface")."""
+        Denoise's convention for "no surface"); an emitter's albedo is its base colour plus
+        its radiance, clamped to [0, 1]."""
         height = out.shape[0]
         width = out.shape[1]
         acc = (ZERO, ZERO, ZERO)
@@ -512,12 +513,21 @@ def make_kernels(features, target="cpu"):
                                              spread)
                 is_principled, params = material_at(scene.mat, scene.mat_tex, scene.tex_data,
                                                     scene.tex_int, scene.tex_f, m, tu, tv, fp)
+                # an emitter: its base colour plus its radiance, clamped to [0, 1] as the
+                # sky's is; with the base colour alone a light and the ceiling around it
+                # have one albedo, and the denoiser blurs the light's edge into the ceiling
+                le = (ZERO, ZERO, ZERO)
+                if TRI_LIGHTS:
+                    le, _, hit_light = hit_emission(
+                        scene.mat, scene.mat_tex, scene.tex_data, scene.tex_int, scene.tex_f,
+                        scene.tri_light_pdf, tri, m, dot(ng, wo), t, ZERO, tu, tv, fp)
                 ng, ns, tangent, bitangent, wp = shading_frame(
                     scene.tri_n, scene.tri_t, scene.mat_tex, scene.tex_data, scene.tex_int,
                     scene.tex_f, tri, m, b1, b2, e1, ng, wo, params[P_TRANSMISSION] > ZERO,
                     tu, tv, fp)
-                albedo = (min(params[P_BASE], ONE), min(params[P_BASE + 1], ONE),
-                          min(params[P_BASE + 2], ONE))
+                albedo = (min(max(params[P_BASE] + le[0], ZERO), ONE),
+                          min(max(params[P_BASE + 1] + le[1], ZERO), ONE),
+                          min(max(params[P_BASE + 2] + le[2], ZERO), ONE))
                 normal = to_world(wp, tangent, bitangent, ns)
                 specular = is_principled and params[P_ROUGHNESS] < AOV_SPECULAR_ROUGHNESS and (
                     params[P_METALLIC] > HALF_F or params[P_TRANSMISSION] > HALF_F)
