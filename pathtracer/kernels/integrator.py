@@ -518,7 +518,8 @@ def make_kernels(features, target="cpu"):
                 # have one albedo, and the denoiser blurs the light's edge into the ceiling
                 le = (ZERO, ZERO, ZERO)
                 if TRI_LIGHTS:
-                    le, _, hit_light = hit_emission(
+                    # (zero radiance where the surface does not emit towards wo)
+                    le, _, _ = hit_emission(
                         scene.mat, scene.mat_tex, scene.tex_data, scene.tex_int, scene.tex_f,
                         scene.tri_light_pdf, tri, m, dot(ng, wo), t, ZERO, tu, tv, fp)
                 ng, ns, tangent, bitangent, wp = shading_frame(
