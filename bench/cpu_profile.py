@@ -7,12 +7,15 @@ CPU kernel, writes the address and size of every function Numba compiled for it 
 library's object code and ``nm``), then renders passes of ``--spp`` for ``--seconds``. The
 parent attributes each sampled instruction address to the function that holds it. Shares are
 of the samples inside the kernel's own code (compilation, Python and the thread pool are
-counted apart as "outside"). Functions that Numba/LLVM inlined are counted in their caller:
+counted apart as "outside"; of the samples taken while it renders, those outside the
+kernel's code are listed by library: libm, Numba's helpers, the thread pool). Functions
+that Numba/LLVM inlined are counted in their caller:
 the table shows what remains a call (on the CPU most device functions are inlined into
 ``render_sample``; traversal, environment lookups and the principled evaluation are not).
 The child compiles into a fresh kernel cache (a kernel loaded from the disk cache keeps no
-object code to read the symbols from). Needs ``perf`` and ``nm`` (binutils); no hardware
-counters are needed (a VM works).
+object code to read the symbols from). ``--annotate FUNCTION`` also prints that function's
+machine code (objdump) with each instruction's share. Needs ``perf``, ``nm`` and
+``objdump`` (binutils); no hardware counters are needed (a VM works).
 """
 import argparse
 import bisect
@@ -70,9 +73,16 @@ def child(args):
                         continue
                     if addr:
                         rows.append((addr, int(parts[1], 16), parts[3]))
+    if args.code:
+        # the machine code itself, for --annotate (read from the process's own memory)
+        import ctypes
+        with open(args.code, "w") as f:
+            json.dump({str(a): ctypes.string_at(a, n).hex() for a, n, _ in rows}, f)
     with open(args.syms, "w") as f:
         json.dump(rows, f)
     backend.render_pass(0, 1, 0, scene.max_bounces, scene.rr_depth)
+    # (perf records with -k mono: its sample times are this clock's)
+    render_start = time.clock_gettime(time.CLOCK_MONOTONIC)
     t0 = time.perf_counter()
     passes = 0
     while time.perf_counter() - t0 < args.seconds:
@@ -81,7 +91,8 @@ def child(args):
     elapsed = time.perf_counter() - t0
     paths = passes * args.spp * scene.width * scene.height
     print(json.dumps({"passes": passes, "seconds": elapsed,
-                      "m_paths_per_s": paths / elapsed / 1e6}))
+                      "m_paths_per_s": paths / elapsed / 1e6, "render_start": render_start,
+                      "render_end": time.clock_gettime(time.CLOCK_MONOTONIC)}))
 
 
 def short_name(symbol):
@@ -105,9 +116,12 @@ def short_name(symbol):
 def profile(args):
     with tempfile.TemporaryDirectory() as tmp:
         data, syms = os.path.join(tmp, "perf.data"), os.path.join(tmp, "syms.json")
-        cmd = ["perf", "record", "-q", "-F", "1999", "-o", data, sys.executable, "-m",
+        code = os.path.join(tmp, "code.json")
+        cmd = ["perf", "record", "-q", "-k", "mono", "-F", "1999", "-o", data,
+               sys.executable, "-m",
                "bench.cpu_profile", args.scene, "--child", "--syms", syms, "--seconds",
-               str(args.seconds), "--spp", str(args.spp)]
+               str(args.seconds), "--spp", str(args.spp)] + (
+                   ["--code", code] if args.annotate else [])
         # a fresh kernel cache: a kernel loaded from the disk cache keeps no object code to
         # read its symbols from, so the child compiles (untimed: rendering starts after)
         env = dict(os.environ, PT_RENDER_CACHE=os.path.join(tmp, "cache"))
@@ -116,29 +130,50 @@ def profile(args):
         if run.returncode != 0:
             sys.exit(f"perf record failed: {run.stderr.strip()[-500:]}")
         rate = json.loads(run.stdout.strip().splitlines()[-1])
-        ips = subprocess.run(["perf", "script", "-i", data, "-F", "ip"], capture_output=True,
-                             text=True).stdout.split()
+        script = subprocess.run(["perf", "script", "-i", data, "-F", "time,ip,dso"],
+                                capture_output=True, text=True).stdout
         with open(syms) as f:
             table = sorted(tuple(r) for r in json.load(f))
+        if args.annotate:
+            with open(code) as f:
+                code_bytes = json.load(f)
     starts = [r[0] for r in table]
     counts = collections.Counter()
+    per_ip = collections.Counter()
+    libraries = collections.Counter()     # samples of the rendering outside the kernel's code
     outside = 0
-    for word in ips:
-        try:
-            ip = int(word, 16)
-        except ValueError:
+    for line in script.splitlines():
+        m = re.match(r"\s*([0-9.]+):\s+([0-9a-f]+)\s+\((.*)\)", line)
+        if not m:
             continue
+        ip = int(m.group(2), 16)
         k = bisect.bisect_right(starts, ip) - 1
         if k >= 0 and ip < table[k][0] + table[k][1]:
             counts[short_name(table[k][2])] += 1
+            per_ip[ip] += 1
         else:
             outside += 1
+            if rate["render_start"] <= float(m.group(1)) <= rate["render_end"]:
+                libraries[os.path.basename(m.group(3))] += 1
     inside = sum(counts.values())
     shares = {name: c / inside for name, c in counts.most_common()}
     print(f"{args.scene}: {rate['m_paths_per_s']:.3f} M camera paths/s while profiled; "
           f"{inside} samples in the kernel's code, {outside} outside")
     for name, s in list(shares.items())[:args.top]:
         print(f"  {100 * s:5.1f}%  {name}")
+    # what the rendering ran outside the kernel's code (libm, Numba's helpers, the thread
+    # pool, unknown: JIT code of other libraries), as shares of all its samples
+    rendering = inside + sum(libraries.values())
+    lib_shares = {name: c / rendering for name, c in libraries.most_common()}
+    print(f"while rendering, {100 * (1 - inside / max(rendering, 1)):.1f}% of the samples "
+          f"were outside the kernel's code:")
+    for name, s in list(lib_shares.items())[:6]:
+        print(f"  {100 * s:5.1f}%  {name}")
+    if args.annotate:
+        for addr, size, sym in table:
+            if short_name(sym) == args.annotate:
+                annotate(addr, bytes.fromhex(code_bytes[str(addr)]), per_ip, inside,
+                         args.annotate_min)
     if args.json:
         from bench.common import machine
         with open(args.json, "w") as f:
@@ -147,7 +182,38 @@ def profile(args):
                                                                    time.gmtime()),
                        "scene": args.scene, "spp_per_pass": args.spp, "profiled": rate,
                        "samples_in_kernel": inside, "samples_outside": outside,
-                       "shares": shares}, f, indent=1)
+                       "shares": shares, "rendering_outside_kernel": lib_shares}, f,
+                      indent=1)
+
+
+def annotate(addr, code, per_ip, inside, min_share):
+    """Print the disassembly (objdump) of one compiled function, each instruction with its
+    share of the kernel's samples; runs of cold instructions are elided. A sample lands on
+    the instruction after the one that stalled more often than on that one (skid)."""
+    with tempfile.NamedTemporaryFile(suffix=".bin") as f:
+        f.write(code)
+        f.flush()
+        dis = subprocess.run(["objdump", "-D", "-b", "binary", "-m", "i386:x86-64",
+                              "--adjust-vma=%#x" % addr, f.name], capture_output=True,
+                             text=True).stdout
+    lines = []
+    for line in dis.splitlines():
+        m = re.match(r"\s*([0-9a-f]+):\t(?:[0-9a-f]{2} )+\s*\t(.*)", line)
+        if m:
+            lines.append((int(m.group(1), 16), m.group(2)))
+    total = sum(per_ip.get(a, 0) for a, _ in lines)
+    print(f"\n{len(lines)} instructions, {100 * total / max(inside, 1):.1f}% of the kernel's "
+          f"samples; instructions with >= {100 * min_share:.2f}% (and 3 before each):")
+    hot = {i for i, (a, _) in enumerate(lines) if per_ip.get(a, 0) >= min_share * inside}
+    show = sorted({j for i in hot for j in range(max(0, i - 3), i + 1)})
+    last = -2
+    for i in show:
+        if i != last + 1:
+            print("   ...")
+        a, text = lines[i]
+        share = 100 * per_ip.get(a, 0) / max(inside, 1)
+        print(f"  {share:5.2f}%  {a - addr:6x}  {text}")
+        last = i
 
 
 def main(argv=None):
@@ -157,8 +223,15 @@ def main(argv=None):
     p.add_argument("--spp", type=int, default=4, help="samples per pixel per pass")
     p.add_argument("--top", type=int, default=20)
     p.add_argument("--json")
+    p.add_argument("--annotate", metavar="FUNCTION",
+                   help="also print this function's instructions with their sample shares "
+                        "(a name as the table prints it, e.g. envmap.env_sample_uv)")
+    p.add_argument("--annotate-min", type=float, default=0.002,
+                   help="share of the kernel's samples from which --annotate shows an "
+                        "instruction (default 0.002)")
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--syms", help=argparse.SUPPRESS)
+    p.add_argument("--code", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.child:
         child(args)

@@ -187,9 +187,30 @@ def test_cpu_profile_names_and_symbol_table():
         syms = os.path.join(tmp, "syms.json")
         env = dict(os.environ, PT_RENDER_CACHE=os.path.join(tmp, "cache"))
         env.pop("NUMBA_CACHE_DIR", None)
+        code = os.path.join(tmp, "code.json")
         r = subprocess.run([sys.executable, "-m", "bench.cpu_profile", "cornell-box", "--child",
-                            "--syms", syms, "--seconds", "0.1", "--spp", "1"], cwd=ROOT,
-                           env=env, capture_output=True, text=True, timeout=600)
+                            "--syms", syms, "--code", code, "--seconds", "0.1", "--spp", "1"],
+                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
         assert r.returncode == 0, r.stderr[-2000:]
-        names = {short_name(row[2]) for row in json.load(open(syms))}
+        rows = json.load(open(syms))
+        code_bytes = json.load(open(code))
+        rate = json.loads(r.stdout.strip().splitlines()[-1])
+    names = {short_name(row[2]) for row in rows}
     assert {"integrator.render_sample", "wide.closest_hit_wide"} <= names, sorted(names)
+    # the machine code of every function, as long as its symbol says
+    assert all(len(code_bytes[str(a)]) == 2 * n for a, n, _ in rows)
+    assert rate["render_start"] <= rate["render_end"]
+
+
+def test_cpu_profile_annotates_instructions(capsys):
+    """--annotate: each instruction of the function with its share of the samples."""
+    import shutil
+    from bench.cpu_profile import annotate
+    if shutil.which("objdump") is None:
+        pytest.skip("needs objdump (binutils)")
+    base = 0x1000
+    # nop; nop; mov %rdi,%rax; ret
+    annotate(base, bytes.fromhex("90904889f8c3"), {base + 2: 30, base + 5: 10}, 40, 0.1)
+    out = capsys.readouterr().out
+    assert "4 instructions, 100.0%" in out
+    assert " 75.00%       2  mov" in out and " 25.00%       5  ret" in out

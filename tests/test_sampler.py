@@ -8,8 +8,8 @@ from numba import njit
 from pathtracer.kernels.layout import (D_BSDF_U, D_FIRST_BOUNCE, D_LIGHT_U, D_PIXEL_X,
                                        DIMS_PER_BOUNCE)
 from pathtracer.kernels.rng import (SOBOL_MATRIX, owen_scramble, pixel_key, reverse_bits,
-                                    sample_sobol, sobol_component, sobol_digits,
-                                    sobol_set)
+                                    make_sampler, sample_sobol, sobol_component,
+                                    sobol_digits, sobol_digits_table, sobol_set)
 from tests.helpers import GOLDEN_SOBOL, chi2_sf, golden_sobol_python_values
 
 # Sobol's first four dimensions, points 0-7 in natural (not Gray-code) order: Joe & Kuo's
@@ -52,6 +52,49 @@ def test_sobol_digits_follow_the_generator_matrices(rng):
         digits = sobol_digits(np.uint64(i))
         for d in range(1, 4):
             assert int(reverse_bits(digits[d - 1])) / 2**32 == _sobol_point(i, d)
+
+
+@njit(cache=True)
+def _digits_both_ways(indices):
+    out = np.zeros((indices.shape[0], 6), np.uint64)
+    for i in range(indices.shape[0]):
+        a = sobol_digits(np.uint64(indices[i]))
+        b = sobol_digits_table(np.uint64(indices[i]))
+        out[i, 0], out[i, 1], out[i, 2] = a
+        out[i, 3], out[i, 4], out[i, 5] = b
+    return out
+
+
+def test_sobol_digit_table_gives_the_same_digits(rng):
+    """The CPU's byte-table form of the Sobol digits equals the loop the GPU runs, compiled
+    and interpreted, for indices of every size."""
+    idx = np.array(list(range(600)) + rng.integers(0, 2**32, 2000).tolist()
+                   + [2**k for k in range(32)] + [2**32 - 1], np.int64)
+    got = _digits_both_ways(idx)
+    np.testing.assert_array_equal(got[:, :3], got[:, 3:])
+    for k in range(0, idx.shape[0], 97):
+        assert tuple(int(x) for x in sobol_digits_table(np.uint64(idx[k]))) == tuple(
+            int(x) for x in got[k, :3])
+
+
+def test_the_cpu_sampler_draws_the_gpu_samplers_numbers():
+    """make_sampler with the digit table (the CPU kernels') and without (the GPU's): the same
+    numbers for every dimension of a path."""
+    dims = np.arange(4 * 12)
+    outs = []
+    for table in (False, True):
+        start_path, open_set, draw = make_sampler(True, table=table)
+
+        @njit
+        def numbers(pixel, sample, seed):
+            state = start_path(pixel, sample, seed)
+            out = np.zeros(dims.shape[0], np.float32)
+            for d in range(dims.shape[0]):
+                out[d] = draw(state, open_set(state, d), d)
+            return out
+        outs.append(np.array([numbers(p, s, 3) for p in (0, 7, 4093) for s in
+                              (0, 1, 5, 255, 1000, 70000, 2**31 + 5)]))
+    np.testing.assert_array_equal(outs[0], outs[1])
 
 
 def test_owen_scramble_is_a_nested_permutation(rng):

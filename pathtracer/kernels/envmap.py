@@ -33,6 +33,7 @@ import numpy as np
 
 from .constants import HALF, LUM_B, LUM_G, LUM_R, ONE, PI, TWO_PI, ZERO
 from .device import device
+from .fmath import acos_f32, atan2_f32
 from .layout import ENV_COS_ROT, ENV_SIN_ROT
 from .lights import sample_discrete
 from .textures import bilinear_blend, bilinear_cell
@@ -51,8 +52,8 @@ def env_uv(env_info, d):
     x = d[0] * c - d[2] * s
     z = d[0] * s + d[2] * c
     y = min(max(d[1], -ONE), ONE)
-    u = HALF + math.atan2(x, -z) * INV_TWO_PI
-    v = math.acos(y) * INV_PI_F
+    u = HALF + atan2_f32(x, -z) * INV_TWO_PI
+    v = acos_f32(y) * INV_PI_F
     return u, v, y
 
 

@@ -113,7 +113,7 @@ def make_kernels(features, target="cpu"):
     WIDE = target == "cpu"
     trace_closest = closest_hit_wide if WIDE else closest_hit
     trace_any = any_hit_wide if WIDE else any_hit
-    start_path, open_set, draw = make_sampler(S.sobol)
+    start_path, open_set, draw = make_sampler(S.sobol, table=target == "cpu")
     surface = make_surface(features, target)
     scatter = make_scatter(features, target)
     emitters = make_emitters(features, target)

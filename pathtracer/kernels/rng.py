@@ -278,6 +278,39 @@ overload(_sobol_digits_py, strict=False)(lambda u: (lambda u: _sobol_digits_ir(u
 sobol_digits = _sobol_digits_py
 
 
+def _sobol_byte_table():
+    """SOBOL_BYTES[k, b, d - 1]: dimension d (1-3) of the Sobol point of index b << 8k, as
+    sobol_digits gives it. The points are linear over GF(2) in the index's bits, so the
+    digits of any index are the XOR of its four bytes' rows."""
+    t = np.zeros((4, 256, 4), np.uint32)
+    for k in range(4):
+        for b in range(256):
+            t[k, b, :3] = _sobol_digits_py(np.uint64(b << (8 * k)))
+    return t
+
+
+SOBOL_BYTES = _sobol_byte_table()
+_B255 = np.uint64(255)
+_S16 = np.uint64(16)
+_S24 = np.uint64(24)
+
+
+@device
+def sobol_digits_table(u):
+    """sobol_digits(u) from SOBOL_BYTES: four table rows instead of a loop over u's bits
+    (the CPU's form: one L1-resident 16 KB table; the GPU keeps the loop, see
+    sobol_digits)."""
+    tab = SOBOL_BYTES
+    b0 = u & _B255
+    b1 = (u >> _S8) & _B255
+    b2 = (u >> _S16) & _B255
+    b3 = (u >> _S24) & _B255
+    x1 = np.uint64(tab[0, b0, 0] ^ tab[1, b1, 0] ^ tab[2, b2, 0] ^ tab[3, b3, 0])
+    x2 = np.uint64(tab[0, b0, 1] ^ tab[1, b1, 1] ^ tab[2, b2, 1] ^ tab[3, b3, 1])
+    x3 = np.uint64(tab[0, b0, 2] ^ tab[1, b1, 2] ^ tab[2, b2, 2] ^ tab[3, b3, 2])
+    return x1, x2, x3
+
+
 @device
 def owen_scramble(x, seed):
     """Nested uniform (Owen) scramble of the 32-bit fraction x (Burley 2020, listing 4)."""
@@ -308,6 +341,16 @@ def sobol_set(pix, index_reversed, dset):
 
 
 @device
+def sobol_set_table(pix, index_reversed, dset):
+    """sobol_set with the digits from SOBOL_BYTES (the same numbers)."""
+    seed = pcg_hash((pix + (np.uint64(dset) + _K1) * _SET_MUL) & M32)
+    t = lk_permutation(index_reversed, seed) ^ lk_permutation(np.uint64(0), seed)
+    u = reverse_bits(t)
+    x1, x2, x3 = sobol_digits_table(u)
+    return u, x1, x2, x3, seed
+
+
+@device
 def sobol_component(sobol, comp):
     """Uniform float32 in [0, 1): coordinate ``comp`` (0-3) of a sobol_set, Owen-scrambled
     with its own seed."""
@@ -324,7 +367,7 @@ def sample_sobol(pix, index, dim):
                            dim & 3)
 
 
-def make_sampler(sobol):
+def make_sampler(sobol, table=False):
     """The functions of a sampler (closures over the choice, so the other one is not
     compiled):
 
@@ -337,6 +380,7 @@ def make_sampler(sobol):
     The independent sampler's numbers are ``sample_1d(path_key(pixel, sample, seed), dim)``.
     """
     SOBOL = bool(sobol)
+    TABLE = bool(table)
     ZERO_SET = (np.uint64(0), np.uint64(0), np.uint64(0), np.uint64(0), np.uint64(0))
 
     @device
@@ -350,6 +394,8 @@ def make_sampler(sobol):
     @device
     def open_set(state, dim):
         if SOBOL:
+            if TABLE:
+                return sobol_set_table(state[1], state[2], dim >> 2)
             return sobol_set(state[1], state[2], dim >> 2)
         return ZERO_SET
 

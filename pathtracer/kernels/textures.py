@@ -15,6 +15,7 @@ import numpy as np
 
 from .constants import HALF, ONE, ZERO
 from .device import device
+from .fmath import floor_int
 from .layout import (FILTER_NEAREST, FILTER_TRILINEAR, TEX_FILTER, TEX_FIRST, TEX_HEIGHT,
                      TEX_LEVELS, TEX_OFFSET, TEX_SCALE, TEX_TILE, TEX_WIDTH, TEX_WRAP, TRI_UV0,
                      TRI_UV1, TRI_UV2, WRAP_MIRROR, WRAP_REPEAT)
@@ -68,8 +69,8 @@ def bilinear_cell(x, y):
     texel units with centres at half-integers, and the fractions (fx, fy) towards the next."""
     x -= HALF
     y -= HALF
-    ix = int(math.floor(x))
-    iy = int(math.floor(y))
+    ix = floor_int(x)
+    iy = floor_int(y)
     return ix, iy, x - np.float32(ix), y - np.float32(iy)
 
 
@@ -121,7 +122,7 @@ def make_tex_lookup(wrap_modes, mipmaps=False):
         (Williams 1983, "Pyramidal Parametrics"); level k is max(1, w >> k) x
         max(1, h >> k) texels and follows level k - 1 in the texel array."""
         lod = min(lod, np.float32(levels - 1))
-        level = int(math.floor(lod))
+        level = floor_int(lod)
         frac = lod - np.float32(level)
         for _ in range(level):
             base += w * h
@@ -205,8 +206,8 @@ def make_tex_lookup(wrap_modes, mipmaps=False):
                         fp[0] * tile_u, fp[1] * tile_v, major, minor, mode_u, mode_v))
         uu, vv = wrapped(su, sv, mode_u, mode_v)
         if filt == FILTER_NEAREST:
-            ix = int(math.floor(uu * np.float32(w)))
-            iy = int(math.floor((ONE - vv) * np.float32(h)))
+            ix = floor_int(uu * np.float32(w))
+            iy = floor_int((ONE - vv) * np.float32(h))
             if WRAP_MODES:
                 rgb = texel(tex_data, base, w, wrap_index(ix, w, mode_u),
                             wrap_index(iy, h, mode_v))

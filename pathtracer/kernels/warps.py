@@ -5,6 +5,7 @@ import numpy as np
 
 from .constants import F32, INV_PI, ONE, PI_OVER_4, TWO, ZERO
 from .device import device
+from .fmath import floor_int
 
 
 # Taylor coefficients of sin and cos; on |x| <= pi/4 the truncation error is below 2e-9,
@@ -40,7 +41,7 @@ def sincos_quarter(x):
 def sincos(x):
     """(sin x, cos x) for |x| <= 2 pi in float32: reduced to the nearest multiple of pi/2,
     then the quarter polynomial (libdevice's sinf carries a float64 path, see above)."""
-    k = int(math.floor(x * TWO_OVER_PI + HALF_F))
+    k = floor_int(x * TWO_OVER_PI + HALF_F)
     r = x - np.float32(k) * PI_OVER_2_F
     s, c = sincos_quarter(r)
     q = k & 3
