@@ -281,7 +281,8 @@ sobol_digits = _sobol_digits_py
 def _sobol_byte_table():
     """SOBOL_BYTES[k, b, d - 1]: dimension d (1-3) of the Sobol point of index b << 8k, as
     sobol_digits gives it. The points are linear over GF(2) in the index's bits, so the
-    digits of any index are the XOR of its four bytes' rows."""
+    digits of any index are the XOR of its four bytes' rows. (The fourth column, zeros,
+    pads an entry to 16 bytes.)"""
     t = np.zeros((4, 256, 4), np.uint32)
     for k in range(4):
         for b in range(256):
@@ -333,19 +334,23 @@ def sobol_set(pix, index_reversed, dset):
     distribution as Burley's. All of it runs in reversed bit order (as Cycles does), which
     saves reversing the index and the coordinates back and forth; the shuffled index is
     reversed back once, to walk its bits from the lowest (sobol_digits)."""
-    seed = pcg_hash((pix + (np.uint64(dset) + _K1) * _SET_MUL) & M32)
-    t = lk_permutation(index_reversed, seed) ^ lk_permutation(np.uint64(0), seed)
-    u = reverse_bits(t)     # the shuffled index
+    u, seed = shuffled_index(pix, index_reversed, dset)
     x1, x2, x3 = sobol_digits(u)
     return u, x1, x2, x3, seed
 
 
 @device
-def sobol_set_table(pix, index_reversed, dset):
-    """sobol_set with the digits from SOBOL_BYTES (the same numbers)."""
+def shuffled_index(pix, index_reversed, dset):
+    """(the shuffled sample index, the set's seed) of sobol_set."""
     seed = pcg_hash((pix + (np.uint64(dset) + _K1) * _SET_MUL) & M32)
     t = lk_permutation(index_reversed, seed) ^ lk_permutation(np.uint64(0), seed)
-    u = reverse_bits(t)
+    return reverse_bits(t), seed
+
+
+@device
+def sobol_set_table(pix, index_reversed, dset):
+    """sobol_set with the digits from SOBOL_BYTES (the same numbers; the CPU's form)."""
+    u, seed = shuffled_index(pix, index_reversed, dset)
     x1, x2, x3 = sobol_digits_table(u)
     return u, x1, x2, x3, seed
 
@@ -378,6 +383,9 @@ def make_sampler(sobol, table=False):
       set ``dims``.
 
     The independent sampler's numbers are ``sample_1d(path_key(pixel, sample, seed), dim)``.
+    ``table``: the sobol sampler reads its Sobol digits from SOBOL_BYTES (the CPU kernels:
+    four loads, not a loop over the index's bits; the GPU's constant cache would serialise
+    them), the same numbers.
     """
     SOBOL = bool(sobol)
     TABLE = bool(table)
