@@ -170,10 +170,14 @@ def profile(args):
     for name, s in list(lib_shares.items())[:6]:
         print(f"  {100 * s:5.1f}%  {name}")
     if args.annotate:
-        for addr, size, sym in table:
-            if short_name(sym) == args.annotate:
-                annotate(addr, bytes.fromhex(code_bytes[str(addr)]), per_ip, inside,
-                         args.annotate_min)
+        found = [(addr, sym) for addr, _, sym in table if short_name(sym) == args.annotate]
+        for addr, sym in found:
+            annotate(addr, bytes.fromhex(code_bytes[str(addr)]), per_ip, inside,
+                     args.annotate_min)
+        if not found:
+            print(f"--annotate: no compiled function is named {args.annotate!r}; the "
+                  f"names are those of the table above (a function inlined into its caller "
+                  f"has none of its own)")
     if args.json:
         from bench.common import machine
         with open(args.json, "w") as f:

@@ -5,8 +5,9 @@
 Rays start on the scene's triangles (a uniform triangle, its centroid) in uniformly random
 directions, the triangle they leave skipped: rays as a path's bounce and shadow rays see
 the mesh, not camera rays. One traversal stack per 256 rays (the renderer allocates one per
-image row; one per ray made the allocator part of the figure). Both trees trace the same rays on all threads; the hit triangles
-are checked equal. Median of ``--repeats`` after a warm-up, compile excluded.
+image row; one per ray made the allocator part of the figure). Both trees trace the same
+rays on all threads; the hit triangles are checked equal. Median of ``--repeats`` after a
+warm-up, compile excluded.
 """
 import argparse
 import json

@@ -8,8 +8,8 @@ specular (metal or glass with roughness below 0.1 is looked through), averaged o
 radiance clamped to [0, 1] as albedo and a zero normal, and an emitting surface its base
 colour plus its radiance, clamped to [0, 1] (so that a light differs from the same-coloured
 surface around it: the Cornell box's denoised relMSE 6.1e-4 -> 5.8e-4, docs/benchmarks.md).
-The colour is denoised as HDR (linear radiance, any range). A denoised image is an estimate, not an unbiased one: the
-raw image is always written beside it.
+The colour is denoised as HDR (linear radiance, any range). A denoised image is an
+estimate, not an unbiased one: the raw image is always written beside it.
 """
 import importlib
 

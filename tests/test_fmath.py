@@ -21,10 +21,11 @@ def _inputs(rng):
     n = 100_000
     ys = np.concatenate([rng.uniform(-1, 1, n), rng.standard_normal(n) * 1e-3,
                          rng.standard_normal(n) * 1e3,
-                         [0, 0, 1, -1, 0.5, -0.5, 1e-30, -1e-30, 0.999999, -0.999999, 3]])
+                         [0, 0, 1, -1, 0.5, -0.5, 1e-30, -1e-30, 0.999999, -0.999999, 3,
+                          0]])
     xs = np.concatenate([rng.uniform(-1, 1, n), rng.standard_normal(n),
                          rng.standard_normal(n),
-                         [1, -1, 0, 0, 0.5, -2, -1, -1, 1e-20, 5, -2.5]])
+                         [1, -1, 0, 0, 0.5, -2, -1, -1, 1e-20, 5, -2.5, 0]])
     return ys.astype(np.float32), xs.astype(np.float32)
 
 
