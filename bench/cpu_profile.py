@@ -137,24 +137,8 @@ def profile(args):
         if args.annotate:
             with open(code) as f:
                 code_bytes = json.load(f)
-    starts = [r[0] for r in table]
-    counts = collections.Counter()
-    per_ip = collections.Counter()
-    libraries = collections.Counter()     # samples of the rendering outside the kernel's code
-    outside = 0
-    for line in script.splitlines():
-        m = re.match(r"\s*([0-9.]+):\s+([0-9a-f]+)\s+\((.*)\)", line)
-        if not m:
-            continue
-        ip = int(m.group(2), 16)
-        k = bisect.bisect_right(starts, ip) - 1
-        if k >= 0 and ip < table[k][0] + table[k][1]:
-            counts[short_name(table[k][2])] += 1
-            per_ip[ip] += 1
-        else:
-            outside += 1
-            if rate["render_start"] <= float(m.group(1)) <= rate["render_end"]:
-                libraries[os.path.basename(m.group(3))] += 1
+    counts, per_ip, libraries, in_window, outside = attribute(
+        script, table, (rate["render_start"], rate["render_end"]))
     inside = sum(counts.values())
     shares = {name: c / inside for name, c in counts.most_common()}
     print(f"{args.scene}: {rate['m_paths_per_s']:.3f} M camera paths/s while profiled; "
@@ -163,9 +147,9 @@ def profile(args):
         print(f"  {100 * s:5.1f}%  {name}")
     # what the rendering ran outside the kernel's code (libm, Numba's helpers, the thread
     # pool, unknown: JIT code of other libraries), as shares of all its samples
-    rendering = inside + sum(libraries.values())
+    rendering = in_window + sum(libraries.values())
     lib_shares = {name: c / rendering for name, c in libraries.most_common()}
-    print(f"while rendering, {100 * (1 - inside / max(rendering, 1)):.1f}% of the samples "
+    print(f"while rendering, {100 * (1 - in_window / max(rendering, 1)):.1f}% of the samples "
           f"were outside the kernel's code:")
     for name, s in list(lib_shares.items())[:6]:
         print(f"  {100 * s:5.1f}%  {name}")
@@ -188,6 +172,35 @@ def profile(args):
                        "samples_in_kernel": inside, "samples_outside": outside,
                        "shares": shares, "rendering_outside_kernel": lib_shares}, f,
                       indent=1)
+
+
+def attribute(script, table, window):
+    """Samples of ``perf script -F time,ip,dso`` output: (samples per compiled function of
+    ``table`` (rows of address, size, symbol), samples per instruction address in them,
+    samples outside them per library taken within ``window`` (start, end: the rendering's
+    CLOCK_MONOTONIC seconds), samples in them within the window, samples outside them)."""
+    starts = [r[0] for r in table]
+    counts = collections.Counter()
+    per_ip = collections.Counter()
+    libraries = collections.Counter()
+    in_window = 0
+    outside = 0
+    for line in script.splitlines():
+        m = re.match(r"\s*([0-9.]+):\s+([0-9a-f]+)\s+\((.*)\)", line)
+        if not m:
+            continue
+        ip = int(m.group(2), 16)
+        rendering = window[0] <= float(m.group(1)) <= window[1]
+        k = bisect.bisect_right(starts, ip) - 1
+        if k >= 0 and ip < table[k][0] + table[k][1]:
+            counts[short_name(table[k][2])] += 1
+            per_ip[ip] += 1
+            in_window += rendering
+        else:
+            outside += 1
+            if rendering:
+                libraries[os.path.basename(m.group(3))] += 1
+    return counts, per_ip, libraries, in_window, outside
 
 
 def annotate(addr, code, per_ip, inside, min_share):

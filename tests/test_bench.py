@@ -202,6 +202,28 @@ def test_cpu_profile_names_and_symbol_table():
     assert rate["render_start"] <= rate["render_end"]
 
 
+def test_cpu_profile_attributes_samples():
+    """perf script lines: kernel samples by function and address; the others by library,
+    only those taken while rendering."""
+    from bench.cpu_profile import attribute
+    table = [(0x1000, 0x100, "_ZN10pathtracer7kernels4wide16closest_hit_wideB2v1"),
+             (0x2000, 0x80, "_ZN10pathtracer7kernels6envmap6env_uvB2v1")]
+    script = "\n".join([
+        "   10.500000:     1004 ([JIT] tid 7)",              # before rendering
+        "   11.000000:     1004 ([JIT] tid 7)",
+        "   11.100000:     1010 ([JIT] tid 7)",
+        "   11.200000:     2040 ([JIT] tid 8)",
+        "   11.300000: 7f0000001234 (/usr/lib/x86_64-linux-gnu/libm.so.6)",
+        "   11.400000:     1100 ([JIT] tid 7)",              # just past closest_hit_wide
+        "    9.000000: 7f0000009999 (/usr/lib/libLLVM.so.19)",  # compiling: not rendering
+        "garbage"])
+    counts, per_ip, libraries, in_window, outside = attribute(script, table, (11.0, 12.0))
+    assert counts == {"wide.closest_hit_wide": 3, "envmap.env_uv": 1}
+    assert per_ip == {0x1004: 2, 0x1010: 1, 0x2040: 1}
+    assert libraries == {"libm.so.6": 1, "[JIT] tid 7": 1}
+    assert in_window == 3 and outside == 3
+
+
 def test_cpu_profile_annotates_instructions(capsys):
     """--annotate: each instruction of the function with its share of the samples."""
     import shutil
