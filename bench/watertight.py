@@ -14,11 +14,10 @@ import json
 import sys
 
 import numpy as np
-from numba import njit, prange
 
+from bench.traversal import tracers
 from pathtracer.accel.bvh import build_bvh
-from pathtracer.accel.wide import WIDE_STACK_SIZE, widen_bvh
-from pathtracer.kernels.constants import INF, STACK_SIZE
+from pathtracer.accel.wide import widen_bvh
 from pathtracer.kernels.traverse import any_hit, closest_hit
 from pathtracer.kernels.wide import any_hit_wide, closest_hit_wide
 from pathtracer.scene.geometry import uv_sphere
@@ -33,22 +32,20 @@ CASES = [(16, 32, 1.0, (0.0, 0.0, 0.0), 3.0),
          (8, 16, 1e-3, (1.0, 2.0, 3.0), 1.0)]
 
 
-def _tracer(closest, occluded, stack_size):
-    @njit(parallel=True)
-    def trace(o, d, tri_v, box, child, tri_out, occluded_out):
-        n = o.shape[0]
-        for c in prange((n + 255) // 256):
-            stack = np.empty(stack_size, np.int32)
-            for i in range(c * 256, min(n, (c + 1) * 256)):
-                oi = (o[i, 0], o[i, 1], o[i, 2])
-                di = (d[i, 0], d[i, 1], d[i, 2])
-                tri_out[i] = closest(oi, di, INF, -1, tri_v, box, child, stack)[1]
-                occluded_out[i] = occluded(oi, di, INF, -1, -1, tri_v, box, child, stack)
-    return trace
+TRACERS = {"binary": tracers(closest_hit, any_hit),
+           "wide": tracers(closest_hit_wide, any_hit_wide)}
 
 
-TRACERS = {"binary": _tracer(closest_hit, any_hit, STACK_SIZE),
-           "wide": _tracer(closest_hit_wide, any_hit_wide, WIDE_STACK_SIZE)}
+def trace(name, o, d, tri_v, box, child):
+    """(hit triangle or -1, occluded) of each ray through tree ``name``'s arrays."""
+    closest, shadow = TRACERS[name]
+    skip = np.full(len(o), -1, np.int32)
+    t = np.empty(len(o), np.float32)
+    tri = np.empty(len(o), np.int32)
+    occluded = np.empty(len(o), np.bool_)
+    closest(o, d, skip, tri_v, box, child, t, tri, occluded)
+    shadow(o, d, skip, tri_v, box, child, t, tri, occluded)
+    return tri, occluded
 
 
 def sphere(n_theta, n_phi, radius, center):
@@ -86,12 +83,10 @@ def measure(cases=CASES, rays=100_000, seed=11):
         o, d = edge_rays(v, f, center, distance, rays, np.random.default_rng(seed))
         rec = {"rings": n_theta, "segments": n_phi, "radius": radius, "centre": list(center),
                "distance": distance, "triangles": len(f), "rays": rays}
-        for name, trace in TRACERS.items():
+        for name in TRACERS:
             box, child = (bvh.box, bvh.child) if name == "binary" else widen_bvh(
                 tri_v, bvh.box, bvh.child)
-            tri = np.empty(rays, np.int32)
-            occluded = np.empty(rays, np.bool_)
-            trace(o, d, tri_v, box, child, tri, occluded)
+            tri, occluded = trace(name, o, d, tri_v, box, child)
             rec[f"{name}_missed"] = int((tri < 0).sum())
             rec[f"{name}_unoccluded"] = int((~occluded).sum())
         out.append(rec)

@@ -243,7 +243,7 @@ def test_watertight_counts_rays_that_slip_through():
     the counts are the cracks of the ray-triangle test. The four-wide tree runs the
     binary tree's test bit for bit, so both lose the same rays; rays aimed at triangle
     interiors never slip through."""
-    from bench.watertight import CASES, TRACERS, edge_rays, measure, sphere
+    from bench.watertight import CASES, edge_rays, measure, sphere, trace
     rec = measure(cases=CASES[:1], rays=20000, seed=3)[0]
     assert rec["binary_missed"] == rec["wide_missed"]
     assert rec["binary_unoccluded"] == rec["wide_unoccluded"]
@@ -256,7 +256,5 @@ def test_watertight_counts_rays_that_slip_through():
     target = centres[rng.integers(0, len(f), len(o))]
     d = (target - o).astype(np.float64)
     d = (d / np.linalg.norm(d, axis=1)[:, None]).astype(np.float32)
-    tri = np.empty(len(o), np.int32)
-    occluded = np.empty(len(o), np.bool_)
-    TRACERS["binary"](o, d, tri_v, bvh.box, bvh.child, tri, occluded)
+    tri, occluded = trace("binary", o, d, tri_v, bvh.box, bvh.child)
     assert (tri >= 0).all() and occluded.all()
