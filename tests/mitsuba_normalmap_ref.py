@@ -52,7 +52,8 @@ def our_scene(obj, png, spp=64, seed=0):
             "render": {"spp": spp, "maxBounces": MAX_BOUNCES, "seed": seed},
             "materials": [m],
             "objects": [{"name": "sphere", "file": obj, "material": "m", "smooth": True}],
-            "environment": {"file": GRADIENT}}
+            # the plain density, as Mitsuba's (see tests/mitsuba_refs.our_scene)
+            "environment": {"file": GRADIENT, "misCompensation": False}}
 
 
 def render_mitsuba(obj, png, spp, variant="llvm_ad_rgb"):

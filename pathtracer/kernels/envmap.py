@@ -15,7 +15,9 @@ texel-centre rows; half cells at the clamped top and bottom) from the marginal C
 it from its linear density, then a column cell from the row's CDF interpolated to that v
 (CDFs of bilinear patches are linear in v), and u within it from its linear density. A point
 (u, v) maps to a direction with solid-angle density p(u, v) / (2 pi^2 sin theta), the
-Jacobian of the mapping (the thesis renderer used 2 pi sin theta, pi too large).
+Jacobian of the mapping (the thesis renderer used 2 pi sin theta, pi too large). By default
+the texel weights are max(luminance - mean, 0) x sin(theta) rather than luminance x
+sin(theta) (MIS compensation: see :func:`environment_tables`).
 
 Arrays: ``env_img`` (H, W, 3) radiance with the intensity applied; ``env_marg`` (H + 2,) the
 CDF over the H + 1 row cells; ``env_cond`` (H, W + 1) per texel row the unnormalised
@@ -220,15 +222,31 @@ def env_sample_uv(env_marg, env_cond, env_pdf_arr, env_info, u1, u2):
 
 # ---- Host side: the tables the functions above read ----------------------------------------
 
-def environment_tables(img):
+def environment_tables(img, compensate=True):
     """(image, marginal CDF, conditional cumulative masses, texel-centre densities) of an
     equirectangular map (float H x W x 3, linear radiance), or None when it is black
     everywhere. NumPy, on the host: the bilinear 2-D distribution that :func:`env_sample`
-    draws from and :func:`env_pdf` evaluates."""
+    draws from and :func:`env_pdf` evaluates.
+
+    compensate: sample in proportion to max(luminance - mean luminance, 0) rather than to the
+    luminance (MIS compensation, Karlik et al. 2019, "MIS Compensation: Optimizing Sampling
+    Techniques in Multiple Importance Sampling"; pbrt-v4's ImageInfiniteLight does the same
+    for its light samples). The map is always combined with BSDF sampling by MIS, and BSDF
+    sampling alone already handles the part of the sky that is near its average well: the
+    light samples go to the bright part, where they help. Still unbiased: where the density
+    is 0, the MIS weight of the BSDF sample is 1. A map that is nowhere above its mean (a
+    constant one) keeps the plain density."""
     h, w = img.shape[:2]
-    lum = img @ np.array([LUM_R, LUM_G, LUM_B], np.float64)
+    lum = np.maximum(img @ np.array([LUM_R, LUM_G, LUM_B], np.float64), 0.0)
     sin_t = np.sin(np.pi * (np.arange(h) + 0.5) / h)
-    wgt = np.maximum(lum, 0.0) * sin_t[:, None]
+    wgt = lum * sin_t[:, None]
+    if compensate and wgt.sum() > 0:
+        # the mean over the sphere (texels weighted by their solid angle, ~ sin theta)
+        mean = wgt.sum() / (sin_t.sum() * w)
+        above = np.maximum(lum - mean, 0.0) * sin_t[:, None]
+        # (a map within rounding of its mean: keep the plain density)
+        if above.sum() > 1e-6 * wgt.sum():
+            wgt = above
     # column cell i spans texel centres i and i + 1 (wrapping): mass (w_i + w_i+1) / 2
     cells = 0.5 * (wgt + np.roll(wgt, -1, axis=1))
     rows = wgt.sum(axis=1)                     # = cells.sum(axis=1)

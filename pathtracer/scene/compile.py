@@ -716,7 +716,7 @@ def compile_environment(desc, has_lights, memo=None):
     if isinstance(desc.environment, EnvironmentMap):
         env_map = desc.environment
         got = _environment_map_tables(env_map, desc.path) if memo is None else memo.get(
-            ("environment", file_key(env_map.path), env_map.intensity),
+            ("environment", file_key(env_map.path), env_map.intensity, env_map.compensate),
             lambda: _environment_map_tables(env_map, desc.path))
         if got is not None:
             img, marg, cond, pdf = got
@@ -742,7 +742,7 @@ def _environment_map_tables(env, scene_file):
         raise SceneError(f"environment map {env.path}: its brightest texel x intensity = "
                          f"{top:g} exceeds the largest radiance, {limits.MAX_RADIANCE:g}",
                          scene_file, env.pointer)
-    return environment_tables(img * env.intensity)
+    return environment_tables(img * env.intensity, compensate=env.compensate)
 
 
 # ---------------------------------------------------------------------------------------

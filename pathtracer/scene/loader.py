@@ -108,6 +108,7 @@ class EnvironmentMap:
     intensity: float = 1.0
     rotation: float = 0.0      # degrees about +Y
     pointer: str = ""
+    compensate: bool = True    # MIS compensation of the sampling density (kernels.envmap)
 
 
 @dataclass
@@ -756,10 +757,11 @@ def _environment(n, base, thesis=False):
     if n.has(file_key):
         name = n.string(file_key)
         path = os.path.join(base, "HDRI", name + ".hdr") if thesis else os.path.join(base, name)
+        compensate = True if thesis else n.boolean("misCompensation", True)
         n.finish()
         if not os.path.isfile(path):
             raise n.error(f"environment map not found: {path}", file_key)
-        return EnvironmentMap(path, intensity, rotation, n.path(file_key))
+        return EnvironmentMap(path, intensity, rotation, n.path(file_key), compensate)
     if not n.has("color"):
         raise n.error(f"needs 'color' or '{file_key}'")
     color = n.color("color")
