@@ -189,11 +189,12 @@ def _radiance_over_pdf(img, pdf, inf, n):
 
 @needs_shared
 def test_sampling_density_follows_the_bilinear_radiance():
-    """Without MIS compensation: on the sunlit HDRI, luminance / pdf is the same in every direction to 3 % (the
-    density is the bilinear lookup's luminance x sin(theta), sin taken at texel centres):
-    so direct light from the environment has no fireflies from the density. A
-    piecewise-constant density over texels (the one used before) gave 73x here, at the
-    sun's bilinear skirt."""
+    """Without MIS compensation: on the sunlit HDRI, luminance / pdf is the same in every
+    direction to 3 % (the density is the bilinear lookup's luminance x sin(theta), sin
+    taken at texel centres): so direct light from the environment has no fireflies from the
+    density. A piecewise-constant density over texels (the one used before) gave 73x here,
+    at the sun's bilinear skirt. With compensation the density follows the excess over the
+    sky's mean instead (test_compensated_density_is_the_excess_over_the_mean)."""
     img, _ = read_image(os.path.join(SHARED, "assets", "hdri", "rooitou_park_1k.hdr"))
     img32, marg, cond, pdf = environment_tables(img, compensate=False)
     q = _radiance_over_pdf(img32, pdf, info(-75.0), 2_000_000)
@@ -288,10 +289,10 @@ def test_compensated_sampling_chi_square():
 def test_compensation_keeps_the_image(tmp_path, backend):
     """Unbiasedness: a diffuse sphere and a rough metal sphere on a diffuse floor under the
     synthetic sky with its sun, rendered with the compensated density and with the plain
-    one ("misCompensation": false; the same estimator otherwise): per pixel, the means of 24 renders of each agree
-    within their standard errors (z-test). Where the compensated density is 0, only BSDF
-    sampling reaches the sky, with MIS weight 1: a wrong weight there would lose or double
-    the sky's light in the shadows."""
+    one ("misCompensation": false; the same estimator otherwise): per pixel, the means of
+    24 renders of each agree within their standard errors (z-test). Where the compensated
+    density is 0, only BSDF sampling reaches the sky, with MIS weight 1: a wrong weight
+    there would lose or double the sky's light in the shadows."""
     write_image(str(tmp_path / "sky.hdr"), _sky_with_sun())
     v, f = sphere_mesh(12, 24, radius=0.5)
     floor_v = [[-3, -0.5, -3], [3, -0.5, -3], [3, -0.5, 3], [-3, -0.5, 3]]
