@@ -137,6 +137,9 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
     # the film only adds the ray counts up: a backend that can sum them itself (CUDA: on
     # the GPU) returns the totals rather than H x W x 3 counts per pass
     render_pass = getattr(backend, "render_pass_totals", backend.render_pass)
+    render_halves = getattr(backend, "render_halves", None) if adaptive else None
+    if render_halves is not None:
+        backend.prepare_halves()
     result = RenderResult(film, 0.0, compile_seconds)
     n = 2 if adaptive else max(1, int(first_pass))
     active = None
@@ -164,10 +167,16 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
                 half = n // 2
                 n = 2 * half
                 first = film.spp
-                for k in range(2):
-                    pass_sum, stats = render_pass(first + k * half, half, seed, max_bounces,
-                                                  rr_depth, active)
-                    film.add(pass_sum, stats, half, active, half_b=k == 1)
+                if render_halves is not None:
+                    # (both halves from one launch: CUDA)
+                    for k, (pass_sum, stats) in enumerate(render_halves(
+                            first, half, seed, max_bounces, rr_depth, active)):
+                        film.add(pass_sum, stats, half, active, half_b=k == 1)
+                else:
+                    for k in range(2):
+                        pass_sum, stats = render_pass(first + k * half, half, seed,
+                                                      max_bounces, rr_depth, active)
+                        film.add(pass_sum, stats, half, active, half_b=k == 1)
             elif active is not None:
                 pass_sum, stats = render_pass(film.spp, n, seed, max_bounces, rr_depth, active)
                 film.add(pass_sum, stats, n, active)

@@ -49,6 +49,22 @@ for name, options in [("finish", dict(wave_levels=2)), ("all", dict(wave_levels=
                       active_equal=bool((xa[active == 1] == x[active == 1]).all()),
                       inactive_zero=bool((xa[2, 3] == 0).all() and (sxa[2, 3] == 0).all()))
 out["wavefront"] = wave
+# render_halves (an adaptive pass's two halves from one launch): the numbers of two
+# launches, bit for bit; the wavefront with sample ranges of 2 samples, one of which
+# straddles the split at 3
+halves = {}
+for name, be in [("megakernel", CUDABackend(s, wavefront=False)),
+                 ("wavefront", CUDABackend(s, wavefront=dict(wave_levels=None)))]:
+    if be.wavefront is not None:
+        be.wavefront.max_paths = 60
+    (a1, ta1), (b1, tb1) = [[v.copy() for v in h] for h in be.render_halves(2, 3, 1, 7, 5,
+                                                                             active)]
+    a2, ta2 = [v.copy() for v in be.render_pass_totals(2, 3, 1, 7, 5, active)]
+    b2, tb2 = [v.copy() for v in be.render_pass_totals(5, 3, 1, 7, 5, active)]
+    halves[name] = dict(equal=bool((a1 == a2).all() and (b1 == b2).all()),
+                        totals_equal=bool((ta1 == ta2).all() and (tb1 == tb2).all()),
+                        differ=bool((a1 != b1).any()), sum=float(a1.sum() + b1.sum()))
+out["halves"] = halves
 # Furnace on the simulator: L = Le * sum_{k<=3} a^k.
 f = load_scene(write_scene(tempfile.mkdtemp(), furnace_scene(0.5, 0.5, 3, res=(4, 4))))
 img, st = CUDABackend(f).render_pass(0, 24, 0, 3, 5)
@@ -78,3 +94,6 @@ def test_cuda_kernel_on_simulator():
         assert got["sum"] > 0 and got["maxdiff"] < 1e-4, (name, got)
         assert got["equal_megakernel"], (name, got)
         assert got["stats_equal"] and got["active_equal"] and got["inactive_zero"], (name, got)
+    for name, got in out["halves"].items():
+        assert got["sum"] > 0 and got["differ"], (name, got)
+        assert got["equal"] and got["totals_equal"], (name, got)

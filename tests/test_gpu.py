@@ -162,6 +162,28 @@ def test_wavefront_equals_megakernel(tmp_path):
 
 
 @gpu
+def test_adaptive_halves_in_one_launch(tmp_path):
+    """render_halves (an adaptive pass's two halves from one launch) gives the numbers of
+    two render_pass_totals launches bit for bit, on the megakernel and on the wavefront
+    (sample ranges of 3 samples, one of them straddling the split at 8), with pixels left
+    out."""
+    from pathtracer.backends.cuda import CUDABackend
+    s = _full_feature_scene(tmp_path)
+    active = np.ones((s.height, s.width), np.uint8)
+    active[::3, ::2] = 0
+    for options in (False, dict(max_paths=s.width * s.height * 3)):
+        be = CUDABackend(s, wavefront=options)
+        be.prepare_halves()
+        (a1, ta1), (b1, tb1) = [[v.copy() for v in h]
+                                for h in be.render_halves(4, 8, 1, 6, 2, active)]
+        a2, ta2 = [v.copy() for v in be.render_pass_totals(4, 8, 1, 6, 2, active)]
+        b2, tb2 = [v.copy() for v in be.render_pass_totals(12, 8, 1, 6, 2, active)]
+        assert (a1 == a2).all() and (b1 == b2).all(), options
+        assert (ta1 == ta2).all() and (tb1 == tb2).all(), options
+        assert (a1 != b1).any() and (a1[active == 0] == 0).all()
+
+
+@gpu
 def test_aov_parity(tmp_path):
     """The denoiser's albedo and normal images are the same on the CPU and the GPU."""
     from pathtracer.backends import make_backend

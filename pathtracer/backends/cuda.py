@@ -300,6 +300,7 @@ class CUDABackend:
         self.d_stats = cuda.device_array((h, w, 3), np.int32)
         self._parts = None   # scratch film (float sums, ray counts), see _scratch
         self._totals = None  # a work item's ray counts (render_rows)
+        self._halves = None  # the second half's film of render_halves (device, host)
         self.d_all_pixels = cuda.to_device(np.ones((h, w), np.uint8))
         self._compiled = False
         self.out = cuda.pinned_array((h, w, 3), np.float32)
@@ -334,10 +335,11 @@ class CUDABackend:
         cuda.synchronize()
         self._compiled = True
 
-    def _scratch(self, groups):
+    def _scratch(self, groups, halves=False):
         """The scratch film for ``groups`` sample groups: a view of one allocation that
-        only grows (progressive passes double their samples until the launch is full)."""
-        if groups == 1:
+        only grows (progressive passes double their samples until the launch is full);
+        ``halves``: never the film itself (render_halves sums two films from it)."""
+        if groups == 1 and not halves:
             return self.d_out.reshape((1,) + self.d_out.shape), \
                 self.d_stats.reshape((1,) + self.d_stats.shape)
         if self._parts is None or self._parts[0].shape[0] < groups:
@@ -372,7 +374,7 @@ class CUDABackend:
         self.d_stats.copy_to_host(self.stats)
         return self.out, self.stats
 
-    def _totals_of_pass(self):
+    def _totals_of_pass(self, d_stats=None):
         """The pass's ray counts summed on the GPU (int64, 3): a few bytes copied instead
         of H x W x 3 counts and three strided sums on the host."""
         if self._totals is None:
@@ -380,7 +382,8 @@ class CUDABackend:
             self._totals_host = cuda.pinned_array(3, np.int64)
         self._totals.copy_to_device(np.zeros(3, np.int64))
         # (128 blocks at least: fewer make Numba warn of low occupancy)
-        sum_stats[max(128, (self.scene.height + 31) // 32), 32](self.d_stats, self._totals)
+        sum_stats[max(128, (self.scene.height + 31) // 32), 32](
+            self.d_stats if d_stats is None else d_stats, self._totals)
         self._totals.copy_to_host(self._totals_host)
         return self._totals_host
 
@@ -392,6 +395,60 @@ class CUDABackend:
         self.launch(sample_start, n_samples, seed, max_bounces, rr_depth, active)
         self.d_out.copy_to_host(self.out)
         return self.out, self._totals_of_pass().reshape(1, 1, 3)
+
+    def render_halves(self, sample_start, half, seed, max_bounces, rr_depth, active=None):
+        """The two halves of an adaptive pass, samples [sample_start, + half) and the
+        ``half`` after them, as two render_pass_totals results ((sums, counts 1 x 1 x 3)
+        each), from one launch: the same numbers as two launches, at about the cost of one
+        (two launches of half a small pass cost 1.7-2x one launch of all of it on an H100:
+        docs/benchmarks.md, "Environment maps: MIS compensation"). The wavefront adds each
+        pixel's paths of the first half to one film and the rest to another; the
+        megakernel's sample groups split at the half (twice the groups one half would get,
+        so each half is summed as its own launch would sum it)."""
+        h, w = self.scene.height, self.scene.width
+        n = 2 * half
+        d_out_b, d_stats_b, out_b = self._half_films()
+        d_active = self.d_all_pixels if active is None else cuda.to_device(active)
+        if self.wavefront is not None and n * w * h >= self.wave_min_paths:
+            self.wavefront.launch(self.d_scene, self.d_out, self.d_stats, d_active,
+                                  sample_start, n, seed, max_bounces, rr_depth,
+                                  split=half, d_out_b=d_out_b, d_stats_b=d_stats_b)
+        else:
+            groups = sample_groups(w, h, half, self.target_threads)
+            if 2 * groups * w * h > MAX_SLICES:
+                # (a scratch film twice the largest one: two launches instead)
+                return (tuple(np.array(a) for a in self.render_pass_totals(
+                            sample_start, half, seed, max_bounces, rr_depth, active)),
+                        self.render_pass_totals(sample_start + half, half, seed,
+                                                max_bounces, rr_depth, active))
+            parts, part_stats = self._scratch(2 * groups, halves=True)
+            self.kernel[self.grid + (2 * groups,), self.block](
+                parts, part_stats, sample_start, n, seed, max_bounces, rr_depth,
+                self.d_scene, d_active)
+            sum_groups[self.grid, self.block](parts[:groups], part_stats[:groups], groups,
+                                              self.d_out, self.d_stats)
+            sum_groups[self.grid, self.block](parts[groups:], part_stats[groups:], groups,
+                                              d_out_b, d_stats_b)
+        self.d_out.copy_to_host(self.out)
+        totals_a = self._totals_of_pass().reshape(1, 1, 3).copy()
+        d_out_b.copy_to_host(out_b)
+        return (self.out, totals_a), (out_b, self._totals_of_pass(d_stats_b).reshape(1, 1, 3))
+
+    def _half_films(self):
+        """The second half's film of render_halves (device sums and counts, pinned host
+        sums), allocated once (prepare_halves: before an adaptive render's clock starts,
+        as __init__ allocates the first film)."""
+        if self._halves is None:
+            h, w = self.scene.height, self.scene.width
+            self._halves = (cuda.device_array((h, w, 3), np.float32),
+                            cuda.device_array((h, w, 3), np.int32),
+                            cuda.pinned_array((h, w, 3), np.float32))
+        return self._halves
+
+    def prepare_halves(self):
+        """Allocate what render_halves needs (an adaptive render calls it before it starts
+        its clock)."""
+        self._half_films()
 
     def render_rows(self, sample_start, n_samples, seed, max_bounces, rr_depth, row0, row1,
                     active=None):

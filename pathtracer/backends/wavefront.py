@@ -195,10 +195,10 @@ def wavefront_kernels(features, max_registers=None, fast=False):
                         rr_depth, scene, paths_f, paths_i, stack)
 
     @cuda.jit(cache=jit_cache(), **plain_options)
-    def film(n_samples, paths_f, paths_i, out, stats, first):
+    def film(s0, n_samples, paths_f, paths_i, out, stats, first):
         px, py = cuda.grid(2)
         if px < out.shape[1] and py < out.shape[0]:
-            wave_film(px, py, n_samples, paths_f, paths_i, out, stats, first)
+            wave_film(px, py, s0, n_samples, paths_f, paths_i, out, stats, first)
 
     @cuda.jit(cache=jit_cache())
     def zero(counts):
@@ -288,8 +288,11 @@ class WavefrontLaunch:
         return (threads + BLOCK - 1) // BLOCK
 
     def launch(self, d_scene, d_out, d_stats, d_active, sample_start, n_samples, seed,
-               max_bounces, rr_depth):
-        """A pass of n_samples per pixel into d_out / d_stats, without waiting."""
+               max_bounces, rr_depth, split=None, d_out_b=None, d_stats_b=None):
+        """A pass of n_samples per pixel into d_out / d_stats, without waiting; ``split``:
+        the samples from the pass's split-th on go to d_out_b / d_stats_b instead (the two
+        halves of an adaptive pass in one launch; each film adds its paths in sample order,
+        as a launch of its own would)."""
         start, extend, miss, shade, finish, film, zero = self.kernels
         w, h = self.width, self.height
         pixels = w * h
@@ -303,7 +306,7 @@ class WavefrontLaunch:
         film_grid = ((w + self.block[0] - 1) // self.block[0],
                      (h + self.block[1] - 1) // self.block[1])
         if n_samples <= 0:      # an empty pass: zeros, as the megakernel leaves
-            film[film_grid, self.block](0, paths_f, paths_i, d_out, d_stats, True)
+            film[film_grid, self.block](0, 0, paths_f, paths_i, d_out, d_stats, True)
             return
         # vertices [0, levels) in launches of their own, then one launch to the ends
         levels = max_bounces + 1 if self.wave_levels is None else \
@@ -335,8 +338,17 @@ class WavefrontLaunch:
                           (self._grid(min(n_paths, self.finish_threads)), BLOCK),
                           queue, counts, levels, s0, w, h, seed, max_bounces, rr_depth,
                           d_scene, paths_f, paths_i)
-            self._run("film", None, film, (film_grid, self.block), ns, paths_f, paths_i,
-                      d_out, d_stats, c0 == 0)
+            if split is None:
+                self._run("film", None, film, (film_grid, self.block), 0, ns, paths_f,
+                          paths_i, d_out, d_stats, c0 == 0)
+                continue
+            na = min(max(split - c0, 0), ns)        # this range's samples before the split
+            if na > 0:
+                self._run("film", None, film, (film_grid, self.block), 0, na, paths_f,
+                          paths_i, d_out, d_stats, c0 == 0)
+            if ns > na:
+                self._run("film", None, film, (film_grid, self.block), na, ns - na, paths_f,
+                          paths_i, d_out_b, d_stats_b, c0 + na == split)
 
     def compile(self, d_scene, d_out, d_stats):
         """Launch every kernel once on no pixel (compiles them, traces nothing), with the

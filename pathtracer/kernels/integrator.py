@@ -684,10 +684,10 @@ def make_kernels(features, target="cpu"):
         paths_i[PATH_SHADOW_RAYS, path] += n_shadow_rays
 
     @entry
-    def wave_film(px, py, n_samples, paths_f, paths_i, out, stats, first):
-        """Add pixel (px, py)'s paths of the launch (n_samples samples, in sample order)
-        to out[py, px] and stats[py, px] (layout STAT_*): from zero where ``first``, else
-        to what an earlier launch of the pass left there."""
+    def wave_film(px, py, s0, n_samples, paths_f, paths_i, out, stats, first):
+        """Add pixel (px, py)'s paths of the launch's samples [s0, s0 + n_samples) (in
+        sample order) to out[py, px] and stats[py, px] (layout STAT_*): from zero where
+        ``first``, else to what an earlier launch of the pass left there."""
         width = out.shape[1]
         pixel = py * width + px
         pixels = width * out.shape[0]
@@ -701,7 +701,7 @@ def make_kernels(features, target="cpu"):
             n_bounce = stats[py, px, STAT_BOUNCE_RAYS]
             n_shadow = stats[py, px, STAT_SHADOW_RAYS]
             n_bad = stats[py, px, STAT_NONFINITE]
-        for s in range(n_samples):
+        for s in range(s0, s0 + n_samples):
             path = s * pixels + pixel
             r, g, b, n_bad = add_sample(r, g, b, n_bad, (
                 paths_f[PATH_RADIANCE, path], paths_f[PATH_RADIANCE + 1, path],
