@@ -32,6 +32,16 @@ def test_time_to_threshold_interpolates_in_log_log():
                                                                    math.log(0.5))))
 
 
+def test_median_curve_takes_each_pass_median_time():
+    from bench.run import median_curve
+    runs = [[(0.1, 1, 0.5), (0.3, 3, 0.2)], [(0.2, 1, 0.5), (0.9, 3, 0.2)],
+            [(0.15, 1, 0.5), (0.4, 3, 0.2)]]
+    assert median_curve(runs) == [(0.15, 1, 0.5), (0.4, 3, 0.2)]
+    assert median_curve(runs[:1]) == runs[0]
+    # runs whose passes differ are not mixed: the first is kept
+    assert median_curve([runs[0], [(0.2, 2, 0.4)]]) == runs[0]
+
+
 def test_rays_per_second_counts_every_ray():
     assert rays_per_second(100, 250, 180, 2.0) == pytest.approx(265.0)
     with pytest.raises(ValueError):
