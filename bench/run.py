@@ -295,6 +295,12 @@ def median_curve(runs):
             for i in range(len(runs[0]))]
 
 
+def adaptive_repeats(args):
+    """Renders per curve of the adaptive section: 5 on the GPU (a render to 1e-3 takes
+    ~0.1 s there), 1 on the CPU (seconds) and in quick runs."""
+    return 5 if args.gpu and not args.quick else 1
+
+
 def section_adaptive(scenes, backend_name, max_spp, r, repeats=1):
     """Time to relMSE 1e-2 and 1e-3 with uniform and with adaptive sampling (target
     ADAPTIVE_TARGET), both progressive from 1 (2) spp; with ``repeats`` > 1, after a
@@ -636,8 +642,9 @@ def summary(r, res, args):
             lines.append(f"| {scene} | {spp} | " + " | ".join(cells) + " |")
     if res["adaptive"]:
         lines += ["", f"## Adaptive sampling (target image relMSE {ADAPTIVE_TARGET:g})", "",
-                  "Progressive renders; on the GPU each pass's time is the median of 5 "
-                  "renders after a warm-up render.", "",
+                  f"Progressive renders; each pass's time is the median of "
+                  f"{adaptive_repeats(args)} render(s)"
+                  + (" after a warm-up render." if adaptive_repeats(args) > 1 else "."), "",
                   "| scene | time to 1e-2 uniform | adaptive | time to 1e-3 uniform | adaptive | "
                   "ratio at 1e-3 |", "|---|---|---|---|---|---|"]
         for scene, modes in res["adaptive"].items():
@@ -818,9 +825,8 @@ def main(argv=None):
                                            peer, spps,
                                            1 if args.tiny else 3 if args.quick else 4, r)
     if "adaptive" in want:
-        # (GPU: each pass's time the median of 5 renders; a CPU render takes seconds)
         res["adaptive"] = section_adaptive(args.scenes[:1] if args.tiny else args.scenes, b,
-                                           max_spp, r, 5 if args.gpu and not args.quick else 1)
+                                           max_spp, r, adaptive_repeats(args))
     if "denoise" in want:
         res["denoise"] = section_denoise(
             args.scenes[:1] if args.tiny else args.scenes, b, 2 if args.tiny else 16,

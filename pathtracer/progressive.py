@@ -167,16 +167,14 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
                 half = n // 2
                 n = 2 * half
                 first = film.spp
-                if render_halves is not None:
-                    # (both halves from one launch: CUDA)
-                    for k, (pass_sum, stats) in enumerate(render_halves(
-                            first, half, seed, max_bounces, rr_depth, active)):
-                        film.add(pass_sum, stats, half, active, half_b=k == 1)
-                else:
-                    for k in range(2):
-                        pass_sum, stats = render_pass(first + k * half, half, seed,
-                                                      max_bounces, rr_depth, active)
-                        film.add(pass_sum, stats, half, active, half_b=k == 1)
+                # both halves from one launch where the backend can (CUDA), else one
+                # launch each (lazily: a pass's buffers are added before the next one)
+                halves = render_halves(first, half, seed, max_bounces, rr_depth, active) \
+                    if render_halves is not None else (
+                        render_pass(first + k * half, half, seed, max_bounces, rr_depth,
+                                    active) for k in range(2))
+                for k, (pass_sum, stats) in enumerate(halves):
+                    film.add(pass_sum, stats, half, active, half_b=k == 1)
             elif active is not None:
                 pass_sum, stats = render_pass(film.spp, n, seed, max_bounces, rr_depth, active)
                 film.add(pass_sum, stats, n, active)

@@ -348,23 +348,39 @@ class CUDABackend:
                            cuda.device_array((groups, h, w, 3), np.int32))
         return self._parts[0][:groups], self._parts[1][:groups]
 
+    def _wavefront_renders(self, n_samples, megakernel=False):
+        """Whether a launch of n_samples per pixel goes to the wavefront kernels."""
+        return self.wavefront is not None and not megakernel and \
+            n_samples * self.scene.width * self.scene.height >= self.wave_min_paths
+
     def launch(self, sample_start, n_samples, seed, max_bounces, rr_depth, active=None,
-               megakernel=False):
+               megakernel=False, split=None):
         """Start a pass without waiting (for timing the kernel alone); ``megakernel``:
-        with the megakernel even where the wavefront kernels would render it."""
+        with the megakernel even where the wavefront kernels would render it; ``split``
+        (render_halves): the samples from the split-th on go to the second half's film.
+        The megakernel then runs twice the sample groups a launch of ``split`` samples
+        would, and sums the first half of the groups apart from the second, so that each
+        half is summed as its own launch would sum it."""
         d_active = self.d_all_pixels if active is None else cuda.to_device(active)
-        if self.wavefront is not None and not megakernel and \
-                n_samples * self.scene.width * self.scene.height >= self.wave_min_paths:
+        d_out_b, d_stats_b = self._half_films()[:2] if split is not None else (None, None)
+        if self._wavefront_renders(n_samples, megakernel):
             self.wavefront.launch(self.d_scene, self.d_out, self.d_stats, d_active,
-                                  sample_start, n_samples, seed, max_bounces, rr_depth)
+                                  sample_start, n_samples, seed, max_bounces, rr_depth,
+                                  split, d_out_b, d_stats_b)
             return
-        groups = sample_groups(self.scene.width, self.scene.height, n_samples,
-                               self.target_threads)
-        parts, part_stats = self._scratch(groups)
-        self.kernel[self.grid + (groups,), self.block](
+        groups = sample_groups(self.scene.width, self.scene.height,
+                               n_samples if split is None else split, self.target_threads)
+        total = groups if split is None else 2 * groups
+        parts, part_stats = self._scratch(total, halves=split is not None)
+        self.kernel[self.grid + (total,), self.block](
             parts, part_stats, sample_start, n_samples, seed, max_bounces, rr_depth,
             self.d_scene, d_active)
-        if groups > 1:
+        if split is not None:
+            sum_groups[self.grid, self.block](parts[:groups], part_stats[:groups], groups,
+                                              self.d_out, self.d_stats)
+            sum_groups[self.grid, self.block](parts[groups:], part_stats[groups:], groups,
+                                              d_out_b, d_stats_b)
+        elif groups > 1:
             sum_groups[self.grid, self.block](parts, part_stats, groups, self.d_out,
                                               self.d_stats)
 
@@ -399,39 +415,23 @@ class CUDABackend:
     def render_halves(self, sample_start, half, seed, max_bounces, rr_depth, active=None):
         """The two halves of an adaptive pass, samples [sample_start, + half) and the
         ``half`` after them, as two render_pass_totals results ((sums, counts 1 x 1 x 3)
-        each), from one launch: the same numbers as two launches, at about the cost of one
-        (two launches of half a small pass cost 1.7-2x one launch of all of it on an H100:
-        docs/benchmarks.md, "Environment maps: MIS compensation"). The wavefront adds each
-        pixel's paths of the first half to one film and the rest to another; the
-        megakernel's sample groups split at the half (twice the groups one half would get,
-        so each half is summed as its own launch would sum it)."""
-        h, w = self.scene.height, self.scene.width
-        n = 2 * half
-        d_out_b, d_stats_b, out_b = self._half_films()
-        d_active = self.d_all_pixels if active is None else cuda.to_device(active)
-        if self.wavefront is not None and n * w * h >= self.wave_min_paths:
-            self.wavefront.launch(self.d_scene, self.d_out, self.d_stats, d_active,
-                                  sample_start, n, seed, max_bounces, rr_depth,
-                                  split=half, d_out_b=d_out_b, d_stats_b=d_stats_b)
-        else:
-            groups = sample_groups(w, h, half, self.target_threads)
-            if 2 * groups * w * h > MAX_SLICES:
-                # (a scratch film twice the largest one: two launches instead)
-                return (tuple(np.array(a) for a in self.render_pass_totals(
-                            sample_start, half, seed, max_bounces, rr_depth, active)),
-                        self.render_pass_totals(sample_start + half, half, seed,
-                                                max_bounces, rr_depth, active))
-            parts, part_stats = self._scratch(2 * groups, halves=True)
-            self.kernel[self.grid + (2 * groups,), self.block](
-                parts, part_stats, sample_start, n, seed, max_bounces, rr_depth,
-                self.d_scene, d_active)
-            sum_groups[self.grid, self.block](parts[:groups], part_stats[:groups], groups,
-                                              self.d_out, self.d_stats)
-            sum_groups[self.grid, self.block](parts[groups:], part_stats[groups:], groups,
-                                              d_out_b, d_stats_b)
+        each), from one launch (``launch``'s split): the same numbers as two launches, with
+        half the launches (a pass of the sun at 256x192 on an H100 ~25 % cheaper in a
+        warmed process; no change in time to error that the benchmark resolves:
+        docs/benchmarks.md, "Environment maps: MIS compensation")."""
+        w, h = self.scene.width, self.scene.height
+        if not self._wavefront_renders(2 * half) and \
+                2 * sample_groups(w, h, half, self.target_threads) * w * h > MAX_SLICES:
+            # (a scratch film twice the largest one: two launches instead)
+            return (tuple(np.array(a) for a in self.render_pass_totals(
+                        sample_start, half, seed, max_bounces, rr_depth, active)),
+                    self.render_pass_totals(sample_start + half, half, seed, max_bounces,
+                                            rr_depth, active))
+        _, d_stats_b, out_b = self._half_films()
+        self.launch(sample_start, 2 * half, seed, max_bounces, rr_depth, active, split=half)
         self.d_out.copy_to_host(self.out)
         totals_a = self._totals_of_pass().reshape(1, 1, 3).copy()
-        d_out_b.copy_to_host(out_b)
+        self._half_films()[0].copy_to_host(out_b)
         return (self.out, totals_a), (out_b, self._totals_of_pass(d_stats_b).reshape(1, 1, 3))
 
     def _half_films(self):
