@@ -10,7 +10,9 @@ import tempfile
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
+from ._cache import jit_cache
 from .kernels.layout import STAT_BOUNCE_RAYS, STAT_NONFINITE, STAT_SHADOW_RAYS
 
 FLOAT_FORMATS = (".hdr", ".exr", ".npy")
@@ -46,15 +48,14 @@ class Film:
         """Add one pass: float32 pixel sums over n_samples paths and its stats (layout
         STAT_*); ``active``: the pixels that took part (None: all); ``half_b``: the pass is
         the second half of an adaptive pass."""
-        self.sum += pass_sum
-        added = n_samples if active is None else n_samples * (active != 0)
-        self.count += added
-        if half_b:
-            if self.sum_b is None:
-                self.sum_b = np.zeros_like(self.sum)
-                self.count_b = np.zeros_like(self.count)
-            self.sum_b += pass_sum
-            self.count_b += added
+        if half_b and self.sum_b is None:
+            self.sum_b = np.zeros_like(self.sum)
+            self.count_b = np.zeros_like(self.count)
+        masked = active is not None
+        _accumulate(self.sum, self.count, pass_sum, n_samples,
+                    active if masked else _NO_MASK, masked,
+                    self.sum_b if half_b else self.sum, self.count_b if half_b else self.count,
+                    half_b)
         self.spp += n_samples
         # One channel at a time: a strided int64 reduction over (N, 3) is ~6x slower, and
         # this runs after every pass (a GPU pass of a small image takes a few ms).
@@ -69,6 +70,43 @@ class Film:
     @property
     def camera_rays(self):
         return int(self.count.sum())
+
+
+_NO_MASK = np.ones((1, 1), np.uint8)
+
+
+@njit(cache=jit_cache())
+def _accumulate(total, count, pass_sum, n_samples, active, masked, total_b, count_b, to_b):
+    """Film.add's sums in one pass over the pixels. NumPy's form (sum += pass_sum, count
+    += n * (active != 0), and again for the second half's sums) made temporaries and
+    several passes over memory: 0.45 ms a call for a 256 x 192 image on the H100 machine's
+    CPU, twice per adaptive pass (2026-11-25)."""
+    h, w = count.shape
+    for y in range(h):
+        for x in range(w):
+            n = n_samples
+            if masked and active[y, x] == 0:
+                n = 0
+            count[y, x] += n
+            if to_b:
+                count_b[y, x] += n
+            for c in range(3):
+                v = np.float64(pass_sum[y, x, c])
+                total[y, x, c] += v
+                if to_b:
+                    total_b[y, x, c] += v
+
+
+def compile_accumulation(adaptive=False):
+    """Compile (or load from the disk cache) Film.add's loop, and with ``adaptive``
+    the error estimate's, so that a render's clock does not count it."""
+    film = Film(1, 1)
+    stats = np.zeros((1, 1, 3), np.int32)
+    film.add(np.zeros((1, 1, 3), np.float32), stats, 1)
+    if adaptive:
+        film.add(np.zeros((1, 1, 3), np.float32), stats, 1, _NO_MASK, half_b=True)
+        from .progressive import error_estimate
+        error_estimate(film)
 
 
 # ---------------------------------------------------------------------------------------
