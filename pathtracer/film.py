@@ -48,6 +48,12 @@ class Film:
         """Add one pass: float32 pixel sums over n_samples paths and its stats (layout
         STAT_*); ``active``: the pixels that took part (None: all); ``half_b``: the pass is
         the second half of an adaptive pass."""
+        # (the loop below indexes without bounds checks: a pass of another size must not
+        # reach it)
+        if pass_sum.shape != self.sum.shape or (
+                active is not None and active.shape != self.count.shape):
+            raise ValueError(f"a pass of shape {pass_sum.shape} for a film of "
+                             f"{self.sum.shape}")
         if half_b and self.sum_b is None:
             self.sum_b = np.zeros_like(self.sum)
             self.count_b = np.zeros_like(self.count)

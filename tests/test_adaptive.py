@@ -102,3 +102,38 @@ def test_error_estimate_equals_its_first_form():
     assert got.shape == want.shape == (37, 53)
     assert np.allclose(got, want, rtol=1e-12, atol=0)
     assert want.max() > 0
+
+
+def test_film_add_sums_what_numpy_sums():
+    """Film.add (one Numba loop) adds a pass to the sums, the counts of the pixels that
+    took part, and for a second half also to sum_b / count_b, as the plain NumPy form
+    does; a pass of another shape is refused, not read out of bounds."""
+    import pytest
+    from pathtracer.film import Film
+    rng = np.random.default_rng(11)
+    film = Film(5, 7)
+    want_sum = np.zeros((5, 7, 3))
+    want_count = np.zeros((5, 7), np.int64)
+    want_sum_b = np.zeros((5, 7, 3))
+    want_count_b = np.zeros((5, 7), np.int64)
+    stats = np.ones((5, 7, 3), np.int32)
+    for k in range(6):
+        active = None if k < 2 else (rng.random((5, 7)) < 0.5).astype(np.uint8)
+        part = rng.random((5, 7, 3)).astype(np.float32)
+        if active is not None:
+            part *= active[..., None]
+        film.add(part, stats, 4, active, half_b=k % 2 == 1)
+        added = 4 if active is None else 4 * (active != 0)
+        want_sum += part
+        want_count += added
+        if k % 2 == 1:
+            want_sum_b += part
+            want_count_b += added
+    assert np.array_equal(film.sum, want_sum) and np.array_equal(film.count, want_count)
+    assert np.array_equal(film.sum_b, want_sum_b)
+    assert np.array_equal(film.count_b, want_count_b)
+    assert film.spp == 24 and film.bounce_rays == 6 * 35
+    with pytest.raises(ValueError):
+        film.add(np.zeros((7, 5, 3), np.float32), stats, 1)
+    with pytest.raises(ValueError):
+        film.add(np.zeros((5, 7, 3), np.float32), stats, 1, np.ones((7, 5), np.uint8))
