@@ -290,9 +290,12 @@ def test_agrees_with_mitsuba_normalmap(tmp_path):
     they agree: both shade with the mapped normal in a frame whose x follows dp/du and y
     the OpenGL (+Y up) bitangent. They differ in the part of a mapped lobe that falls
     below the surface: Mitsuba drops it, we fold it back (no energy lost), so our sphere
-    is uniformly brighter (1.6 % measured). With that one scale taken out, every pixel
-    agrees within the noise; the same map with its green channel flipped (the DirectX
-    convention) does not (pooled ratio 26 measured, 4 seeds)."""
+    is brighter by a scale per channel: the folded part is mostly the white specular
+    lobe's, so the darker channels gain more (red 1.6 %, green 1.7 %, blue 2.3 %: 32
+    renders, 2026-11-25; one scale for all three left blue 0.6 % off, at the mean check's
+    edge). With those scales taken out, every pixel agrees within the noise; the same map
+    with its green channel flipped (the DirectX convention) does not (pooled ratio 26
+    measured, 4 seeds)."""
     from tests.mitsuba_normalmap_ref import NAME, SPHERE_RES, bump_normal_map, our_scene
     from tests.mitsuba_refs import GRADIENT, REF_DIR, gradient_sky
     from tests.test_mitsuba import _check_agreement
@@ -325,11 +328,12 @@ def test_agrees_with_mitsuba_normalmap(tmp_path):
 
     def check(label, imgs):
         px = imgs[:, sphere][:, :, None, :]
-        scale = ref_px.sum() / px.mean(0).sum()
+        scale = ref_px.sum(axis=(0, 1)) / px.mean(0).sum(axis=(0, 1))     # per channel
         _check_agreement(label, px * scale, ref_px, None, ref_share)
         return scale
 
-    scale = check("normal map vs Mitsuba (one scale)", ours)
-    assert 0.96 < scale < 1.0, scale          # ours brighter by the folded energy only
+    scale = check("normal map vs Mitsuba (a scale per channel)", ours)
+    # ours brighter by the folded energy only
+    assert np.all((0.96 < scale) & (scale < 1.0)), scale
     with pytest.raises(AssertionError):
         check("the same map, green flipped", flipped)

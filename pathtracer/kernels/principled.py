@@ -50,6 +50,9 @@ CC_MASK_ALPHA = np.float32(0.25)
 ANISO_K = np.float32(0.9)
 SS_K = np.float32(1.25)
 F0_CLEARCOAT = np.float32(0.04)
+# the dielectric specular lobe's selection weight never falls below this fraction of the
+# diffuse lobe's (see spec_weight)
+SPEC_SELECT_FLOOR = np.float32(0.25)
 PI = np.float32(np.pi)
 
 
@@ -99,6 +102,23 @@ def schlick_fresnel(r0, cos_i, eta):
     cos_t = math.sqrt(max(ONE - (ONE - cos_i * cos_i) * eta_ti * eta_ti, ZERO))
     w = schlick_weight(abs(cos_i)) if eta_it > ONE else schlick_weight(cos_t)
     return r0 + (ONE - r0) * w
+
+
+@device
+def spec_weight(metallic, brdf, bsdf, eta, cos_o):
+    """The specular lobe's selection weight on the front side, beside the diffuse lobe's
+    ``brdf`` and the clearcoat's: the metallic and transmitting parts whole, the dielectric
+    reflection by its Fresnel reflectance at wo (Schlick's, from eta), so that a plastic
+    (F0 = 0.04) spends its BSDF samples on the diffuse light it mostly reflects, as a
+    selection in proportion to each lobe's albedo does (Cycles weights its closures so).
+    The floor (SPEC_SELECT_FLOOR of the diffuse weight) keeps BSDF samples for the
+    highlights of large lights in a sharp lobe, which light sampling finds poorly. A weight
+    of 1 (Mitsuba's choice) spent half of a plastic's samples on the specular lobe: on
+    bunny-studio the new weights lower relMSE at 64 spp by 17 % (docs/benchmarks.md)."""
+    r0 = (eta - ONE) / (eta + ONE)
+    r0 = r0 * r0
+    f = r0 + (ONE - r0) * schlick_weight(abs(cos_o))
+    return metallic + bsdf + brdf * max(f, SPEC_SELECT_FLOOR)
 
 
 @device
@@ -376,7 +396,7 @@ def make_principled(lobes=ALL_LOBES):
 
         # ---- pdf ----
         if front:
-            p_spec = ONE
+            p_spec = spec_weight(metallic, brdf, bsdf, eta, cos_o)
             p_cc = QUARTER * clearcoat
             p_diff = brdf
         else:
@@ -390,6 +410,7 @@ def make_principled(lobes=ALL_LOBES):
             p_trans = ONE - f_diel
         if bsdf <= ZERO and front:
             p_trans = ZERO
+        p_trans = p_trans * p_spec
         p_refl = p_spec - p_trans
         pdf = ZERO
         wo_up = wo if cos_o > ZERO else (-wo[0], -wo[1], -wo[2])
@@ -433,10 +454,12 @@ def make_principled(lobes=ALL_LOBES):
         if front:
             p_cc = QUARTER * clearcoat
             p_diff = brdf
+            p_sp = spec_weight(metallic, brdf, bsdf, eta, cos_o)
         else:
             p_cc = ZERO
             p_diff = ZERO
-        total = ONE + p_cc + p_diff
+            p_sp = ONE
+        total = p_sp + p_cc + p_diff
         x = u_lobe * total
         reflected = True
         if x < p_diff:
@@ -450,7 +473,7 @@ def make_principled(lobes=ALL_LOBES):
             f, cos_t, _, eta_ti = fresnel_dielectric(dot(wo, m), eta)
             p_trans = (bsdf * (ONE - f)) if front else (ONE - f)
             # Remaining mass of this uniform decides between reflection and refraction.
-            if TRANSMISSION and x - (p_diff + p_cc) < p_trans:
+            if TRANSMISSION and (x - (p_diff + p_cc)) / p_sp < p_trans:
                 c = dot(wo, m) * eta_ti + cos_t
                 wi = (-wo[0] * eta_ti + m[0] * c, -wo[1] * eta_ti + m[1] * c,
                       -wo[2] * eta_ti + m[2] * c)
