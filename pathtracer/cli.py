@@ -602,6 +602,10 @@ def _render(args, scene_path, signals):
                 raise InputError(f"--resume {args.resume}: the saved render is "
                                  f"{got.width}x{got.height}, this one {scene.width}x"
                                  f"{scene.height} (give the same --resolution)")
+            if args.adaptive and got.spp > 0 and got.sum_b is None:
+                raise InputError(f"--resume {args.resume}: the saved render was not "
+                                 "adaptive, so it cannot go on with --adaptive (resume it "
+                                 "without --adaptive)")
             if digest != state.scene_hash:
                 raise InputError(f"--resume {args.resume}: the saved render is of another "
                                  "scene, or of other settings (resolution, sampler, "

@@ -142,6 +142,10 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
     elif (film.height, film.width) != (scene.height, scene.width):
         raise ValueError(f"the film to continue is {film.width}x{film.height}, the scene "
                          f"{scene.width}x{scene.height}")
+    if adaptive and film.spp > 0 and film.sum_b is None:
+        # its samples were not taken in halves: the error estimate has nothing to compare
+        raise ValueError(f"the film to continue ({film.spp} spp) was rendered without "
+                         "adaptive sampling: it cannot go on adaptively")
     t0 = time.perf_counter()
     backend.compile()
     compile_accumulation(adaptive=bool(adaptive))

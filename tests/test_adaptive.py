@@ -137,3 +137,17 @@ def test_film_add_sums_what_numpy_sums():
         film.add(np.zeros((7, 5, 3), np.float32), stats, 1)
     with pytest.raises(ValueError):
         film.add(np.zeros((5, 7, 3), np.float32), stats, 1, np.ones((7, 5), np.uint8))
+
+
+def test_a_uniform_film_is_not_continued_adaptively():
+    """A film rendered without adaptive sampling has no halves to estimate the error from:
+    continuing it adaptively is refused with a message, not a Numba typing error."""
+    import pytest
+    scene = _cornell(16)
+    backend = make_backend("cpu", scene)
+    film = render(scene, backend, spp=32).film
+    with pytest.raises(ValueError, match="without adaptive sampling"):
+        render(scene, backend, spp=64, adaptive=1e-3, film=film)
+    # an adaptive film goes on adaptively
+    film = render(scene, backend, spp=32, adaptive=1e-3).film
+    assert render(scene, backend, spp=64, adaptive=1e-3, film=film).film.spp <= 64

@@ -135,6 +135,10 @@ def test_resume_refuses_what_does_not_fit(tmp_path):
     (tmp_path / "bad.state.npz").write_bytes(b"not a zip")
     r = pt_render(*base, "--resume", tmp_path / "bad.state.npz", "--spp", 8)
     assert r.returncode == 2 and "not a readable render state" in r.stderr
+    # a uniform render cannot go on adaptively (no halves to estimate the error from)
+    r = pt_render(*base, "--resume", out, "--spp", 8, "--adaptive", "1e-2")
+    assert r.returncode == 2 and "not adaptive" in r.stderr
+    assert "Traceback" not in r.stderr, r.stderr
     r = pt_render(*base, "--resume", out, "--spp", 8, "--no-state")
     assert r.returncode == 0 and "resuming 4 spp" in r.stderr
 
