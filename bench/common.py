@@ -58,6 +58,8 @@ def command():
     script = os.path.relpath(sys.argv[0], ROOT)
     if script == os.path.join("bench", "__main__.py"):
         script = "-m bench"
+    elif script.startswith("bench" + os.sep) and script.endswith(".py"):
+        script = "-m " + script[:-3].replace(os.sep, ".")      # python -m bench.sweep ...
     return "python " + " ".join([script] + sys.argv[1:])
 
 

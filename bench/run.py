@@ -241,10 +241,25 @@ def _mitsuba_scene(name, sampler):
     return scene, ref
 
 
+def mean_and_error(errs):
+    """(mean, standard error of the mean) of per-seed relMSEs (0 error for one seed)."""
+    errs = np.asarray(errs, np.float64)
+    se = float(errs.std(ddof=1) / np.sqrt(len(errs))) if len(errs) > 1 else 0.0
+    return float(errs.mean()), se
+
+
+def ratio_error(a, sa, b, sb):
+    """Standard error of a / b from the two means' standard errors (first order, the
+    renders of the two samplers independent)."""
+    return float(a / b * np.sqrt((sa / a) ** 2 + (sb / b) ** 2)) if a > 0 and b > 0 else 0.0
+
+
 def section_samplers(scenes, backend_name, mitsuba_variant, spps, seeds, r):
     """relMSE at equal spp, the mean of ``seeds`` renders, of each of our samplers and of
     Mitsuba's independent and low-discrepancy samplers, each renderer against its own
-    reference (the Cornell box: Mitsuba's, for both). {(scene, spp): {renderer: relMSE}}."""
+    reference (the Cornell box: Mitsuba's, for both). {(scene, spp): {renderer: relMSE}};
+    the standard error of each mean is recorded beside it (metric relMSE_stderr) and kept
+    in the result under the key (renderer, "stderr")."""
     import pathtracer as pt
     out = {}
     for name in scenes:
@@ -255,10 +270,12 @@ def section_samplers(scenes, backend_name, mitsuba_variant, spps, seeds, r):
         for sampler in OUR_SAMPLERS:
             scene = convergence_scene(name, sampler)
             for spp in spps:
-                err = float(np.mean([relmse(pt.render(scene, spp=spp, seed=s,
-                                                      backend=backend_name).image, ref)
-                                     for s in range(seeds)]))
-                out.setdefault((name, spp), {})[f"pt-render {backend_name} {sampler}"] = err
+                err, se = mean_and_error([relmse(pt.render(scene, spp=spp, seed=s,
+                                                           backend=backend_name).image, ref)
+                                          for s in range(seeds)])
+                key = f"pt-render {backend_name} {sampler}"
+                out.setdefault((name, spp), {})[key] = err
+                out[name, spp][key, "stderr"] = se
         if mitsuba_variant:
             import drjit as dr
             import mitsuba as mi
@@ -274,11 +291,15 @@ def section_samplers(scenes, backend_name, mitsuba_variant, spps, seeds, r):
                         img = mi.render(scene, spp=spp, seed=1000 + s)
                         dr.eval(img)
                         errs.append(relmse(np.array(img), mref))
-                    out.setdefault((name, spp), {})[
-                        f"Mitsuba {mitsuba_variant} {sampler}"] = float(np.mean(errs))
+                    key = f"Mitsuba {mitsuba_variant} {sampler}"
+                    out.setdefault((name, spp), {})[key], out[name, spp][key, "stderr"] = \
+                        mean_and_error(errs)
     for (name, spp), errs in out.items():
         for renderer, err in errs.items():
-            r.add("samplers", name, renderer, "relMSE", err, "", "spp", spp)
+            if isinstance(renderer, tuple):
+                r.add("samplers", name, renderer[0], "relMSE_stderr", err, "", "spp", spp)
+            else:
+                r.add("samplers", name, renderer, "relMSE", err, "", "spp", spp)
     return out
 
 
@@ -624,21 +645,24 @@ def summary(r, res, args):
                          f"{'' if nz is None else f'{nz:.2g}'} |")
         lines += ["", "![convergence](convergence.png)"]
     if res["samplers"]:
-        names = sorted({k for errs in res["samplers"].values() for k in errs},
+        names = sorted({k for errs in res["samplers"].values() for k in errs
+                        if not isinstance(k, tuple)},
                        key=lambda k: (not k.startswith("pt-render"), k))
         lines += ["", "## Samplers: relMSE at equal spp", "",
-                  "Mean of several seeds; each renderer against its own reference (the Cornell "
-                  "box: Mitsuba's). In brackets: the ratio to the same renderer's independent "
-                  "sampler.", "",
+                  f"Mean of {args.seeds} seeds (+- its standard error); each renderer against "
+                  "its own reference (the Cornell box: Mitsuba's). In brackets: the ratio to "
+                  "the same renderer's independent sampler (+- its standard error).", "",
                   "| scene | spp | " + " | ".join(names) + " |",
                   "|---|---|" + "---|" * len(names)]
         for (scene, spp), errs in res["samplers"].items():
             cells = []
             for k in names:
-                base = errs.get(k.rsplit(" ", 1)[0] + " independent")
-                e = errs.get(k)
-                cells.append("" if e is None else f"{e:.3g}" +
-                             (f" ({e / base:.2f})" if base else ""))
+                bk = k.rsplit(" ", 1)[0] + " independent"
+                base, e = errs.get(bk), errs.get(k)
+                se, sb = errs.get((k, "stderr"), 0.0), errs.get((bk, "stderr"), 0.0)
+                cells.append("" if e is None else f"{e:.3g} +- {se:.2g}" +
+                             (f" ({e / base:.3f} +- {ratio_error(e, se, base, sb):.3f})"
+                              if base and k != bk else ""))
             lines.append(f"| {scene} | {spp} | " + " | ".join(cells) + " |")
     if res["adaptive"]:
         lines += ["", f"## Adaptive sampling (target image relMSE {ADAPTIVE_TARGET:g})", "",
@@ -780,11 +804,18 @@ def main(argv=None):
                         "CPU, 16384 with --gpu; the sun needs ~4096 to pass relMSE 1e-3)")
     p.add_argument("--max-subdivision", type=int, default=3, choices=(0, 1, 2, 3),
                    help="scaling: largest subdivided dragon (3: 6.4M triangles)")
+    p.add_argument("--seeds", type=int, default=None,
+                   help="samplers: renders per sampler and spp, each with its own seed "
+                        "(default 4; --quick 3; --tiny 1)")
     p.add_argument("--replot", nargs="+", metavar="CSV",
                    help="only draw convergence.png (in --out) from these results.csv files")
     args = p.parse_args(argv)
     if args.tiny and not args.quick:
         p.error("--tiny goes with --quick")
+    if args.seeds is None:
+        args.seeds = 1 if args.tiny else 3 if args.quick else 4
+    elif args.seeds < 1:
+        p.error("--seeds must be at least 1")
     if args.replot:
         out = args.out or os.path.dirname(os.path.abspath(args.replot[0]))
         _plot_convergence(curves_from_csv(args.replot), os.path.join(out, "convergence.png"))
@@ -822,8 +853,7 @@ def main(argv=None):
         spps = (2,) if args.tiny else (64,) if args.quick or not args.gpu else (64, 1024)
         # tiny (CI): one scene, so that CI compiles one more kernel, not four
         res["samplers"] = section_samplers(args.scenes[:1] if args.tiny else args.scenes, b,
-                                           peer, spps,
-                                           1 if args.tiny else 3 if args.quick else 4, r)
+                                           peer, spps, args.seeds, r)
     if "adaptive" in want:
         res["adaptive"] = section_adaptive(args.scenes[:1] if args.tiny else args.scenes, b,
                                            max_spp, r, adaptive_repeats(args))

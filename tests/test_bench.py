@@ -32,6 +32,28 @@ def test_time_to_threshold_interpolates_in_log_log():
                                                                    math.log(0.5))))
 
 
+def test_sampler_means_carry_their_standard_errors():
+    from bench.run import mean_and_error, ratio_error
+    m, se = mean_and_error([1.0, 2.0, 3.0, 4.0])
+    assert m == 2.5 and se == pytest.approx(np.std([1, 2, 3, 4], ddof=1) / 2)
+    assert mean_and_error([5.0]) == (5.0, 0.0)
+    # a / b with 10 % and 20 % relative errors: sqrt(0.01 + 0.04) of the ratio
+    assert ratio_error(1.0, 0.1, 2.0, 0.4) == pytest.approx(0.5 * math.sqrt(0.05))
+    assert ratio_error(0.0, 0.1, 2.0, 0.4) == 0.0
+
+
+def test_relative_variance_between_seeds():
+    from bench.sampler_depth import relative_variances
+    rng = np.random.default_rng(1)
+    mean = np.full((8, 8, 3), 2.0)
+    a = mean + rng.normal(0.0, 0.1, (4000, 8, 8, 3))     # variance 0.01
+    b = mean + rng.normal(0.0, 0.3, (4000, 8, 8, 3))     # variance 0.09
+    v = relative_variances({"a": a, "b": b})
+    # each divided by the pooled mean's square (+ 0.01), as relMSE divides by the reference's
+    assert v["a"] == pytest.approx(0.01 / 4.01, rel=0.03)
+    assert v["b"] == pytest.approx(0.09 / 4.01, rel=0.03)
+
+
 def test_median_curve_takes_each_pass_median_time():
     from bench.run import median_curve
     runs = [[(0.1, 1, 0.5), (0.3, 3, 0.2)], [(0.2, 1, 0.5), (0.9, 3, 0.2)],
