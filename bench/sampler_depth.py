@@ -47,6 +47,8 @@ def main(argv=None):
     args = p.parse_args(argv)
     if args.seeds < 2:
         p.error("--seeds: at least 2 (a variance between renders)")
+    if min(args.depths) < 1:
+        p.error("--depths: at least 1 (0 is the light seen directly: no noise to compare)")
     import pathtracer as pt
     from bench.common import mitsuba_cornell
     from bench.scenes import CONVERGENCE, convergence_scene
