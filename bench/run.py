@@ -257,9 +257,8 @@ def ratio_error(a, sa, b, sb):
 def section_samplers(scenes, backend_name, mitsuba_variant, spps, seeds, r):
     """relMSE at equal spp, the mean of ``seeds`` renders, of each of our samplers and of
     Mitsuba's independent and low-discrepancy samplers, each renderer against its own
-    reference (the Cornell box: Mitsuba's, for both). {(scene, spp): {renderer: relMSE}};
-    the standard error of each mean is recorded beside it (metric relMSE_stderr) and kept
-    in the result under the key (renderer, "stderr")."""
+    reference (the Cornell box: Mitsuba's, for both). {(scene, spp): {renderer: (relMSE,
+    its standard error)}}; both are recorded (metrics relMSE and relMSE_stderr)."""
     import pathtracer as pt
     out = {}
     for name in scenes:
@@ -270,12 +269,10 @@ def section_samplers(scenes, backend_name, mitsuba_variant, spps, seeds, r):
         for sampler in OUR_SAMPLERS:
             scene = convergence_scene(name, sampler)
             for spp in spps:
-                err, se = mean_and_error([relmse(pt.render(scene, spp=spp, seed=s,
-                                                           backend=backend_name).image, ref)
-                                          for s in range(seeds)])
-                key = f"pt-render {backend_name} {sampler}"
-                out.setdefault((name, spp), {})[key] = err
-                out[name, spp][key, "stderr"] = se
+                out.setdefault((name, spp), {})[f"pt-render {backend_name} {sampler}"] = \
+                    mean_and_error([relmse(pt.render(scene, spp=spp, seed=s,
+                                                     backend=backend_name).image, ref)
+                                    for s in range(seeds)])
         if mitsuba_variant:
             import drjit as dr
             import mitsuba as mi
@@ -291,15 +288,12 @@ def section_samplers(scenes, backend_name, mitsuba_variant, spps, seeds, r):
                         img = mi.render(scene, spp=spp, seed=1000 + s)
                         dr.eval(img)
                         errs.append(relmse(np.array(img), mref))
-                    key = f"Mitsuba {mitsuba_variant} {sampler}"
-                    out.setdefault((name, spp), {})[key], out[name, spp][key, "stderr"] = \
-                        mean_and_error(errs)
+                    out.setdefault((name, spp), {})[
+                        f"Mitsuba {mitsuba_variant} {sampler}"] = mean_and_error(errs)
     for (name, spp), errs in out.items():
-        for renderer, err in errs.items():
-            if isinstance(renderer, tuple):
-                r.add("samplers", name, renderer[0], "relMSE_stderr", err, "", "spp", spp)
-            else:
-                r.add("samplers", name, renderer, "relMSE", err, "", "spp", spp)
+        for renderer, (err, se) in errs.items():
+            r.add("samplers", name, renderer, "relMSE", err, "", "spp", spp)
+            r.add("samplers", name, renderer, "relMSE_stderr", se, "", "spp", spp)
     return out
 
 
@@ -645,8 +639,7 @@ def summary(r, res, args):
                          f"{'' if nz is None else f'{nz:.2g}'} |")
         lines += ["", "![convergence](convergence.png)"]
     if res["samplers"]:
-        names = sorted({k for errs in res["samplers"].values() for k in errs
-                        if not isinstance(k, tuple)},
+        names = sorted({k for errs in res["samplers"].values() for k in errs},
                        key=lambda k: (not k.startswith("pt-render"), k))
         lines += ["", "## Samplers: relMSE at equal spp", "",
                   f"Mean of {args.seeds} seeds (+- its standard error); each renderer against "
@@ -658,9 +651,12 @@ def summary(r, res, args):
             cells = []
             for k in names:
                 bk = k.rsplit(" ", 1)[0] + " independent"
-                base, e = errs.get(bk), errs.get(k)
-                se, sb = errs.get((k, "stderr"), 0.0), errs.get((bk, "stderr"), 0.0)
-                cells.append("" if e is None else f"{e:.3g} +- {se:.2g}" +
+                if k not in errs:
+                    cells.append("")
+                    continue
+                e, se = errs[k]
+                base, sb = errs.get(bk, (None, 0.0))
+                cells.append(f"{e:.3g} +- {se:.2g}" +
                              (f" ({e / base:.3f} +- {ratio_error(e, se, base, sb):.3f})"
                               if base and k != bk else ""))
             lines.append(f"| {scene} | {spp} | " + " | ".join(cells) + " |")

@@ -45,13 +45,13 @@ def test_sampler_means_carry_their_standard_errors():
 def test_relative_variance_between_seeds():
     from bench.sampler_depth import relative_variances
     rng = np.random.default_rng(1)
-    mean = np.full((8, 8, 3), 2.0)
-    a = mean + rng.normal(0.0, 0.1, (4000, 8, 8, 3))     # variance 0.01
-    b = mean + rng.normal(0.0, 0.3, (4000, 8, 8, 3))     # variance 0.09
+    a = 2.0 + rng.normal(0.0, 0.1, (4000, 8, 8, 3))     # mean 2, variance 0.01
+    b = 4.0 + rng.normal(0.0, 0.3, (4000, 8, 8, 3))     # mean 4, variance 0.09
     v = relative_variances({"a": a, "b": b})
-    # each divided by the pooled mean's square (+ 0.01), as relMSE divides by the reference's
-    assert v["a"] == pytest.approx(0.01 / 4.01, rel=0.03)
-    assert v["b"] == pytest.approx(0.09 / 4.01, rel=0.03)
+    # each divided by the pooled mean's square (3^2 + 0.01), not by its own mean's: every
+    # sampler's variance over the same image, as relMSE divides by one reference
+    assert v["a"] == pytest.approx(0.01 / 9.01, rel=0.03)
+    assert v["b"] == pytest.approx(0.09 / 9.01, rel=0.03)
 
 
 def test_median_curve_takes_each_pass_median_time():

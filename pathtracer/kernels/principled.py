@@ -105,6 +105,13 @@ def schlick_fresnel(r0, cos_i, eta):
 
 
 @device
+def schlick_r0(eta):
+    """Reflectance at normal incidence of a dielectric interface of relative index eta."""
+    r0 = (eta - ONE) / (eta + ONE)
+    return r0 * r0
+
+
+@device
 def spec_weight(metallic, brdf, bsdf, eta, cos_o):
     """The specular lobe's selection weight on the front side, beside the diffuse lobe's
     ``brdf`` and the clearcoat's: the metallic and transmitting parts whole, the dielectric
@@ -115,8 +122,7 @@ def spec_weight(metallic, brdf, bsdf, eta, cos_o):
     highlights of large lights in a sharp lobe, which light sampling finds poorly. A weight
     of 1 (Mitsuba's choice) spent half of a plastic's samples on the specular lobe: on
     bunny-studio the new weights lower relMSE at 64 spp by 17 % (docs/benchmarks.md)."""
-    r0 = (eta - ONE) / (eta + ONE)
-    r0 = r0 * r0
+    r0 = schlick_r0(eta)
     f = r0 + (ONE - r0) * schlick_weight(abs(cos_o))
     return metallic + bsdf + brdf * max(f, SPEC_SELECT_FLOOR)
 
@@ -320,8 +326,7 @@ def make_principled(lobes=ALL_LOBES):
                 tr = base_r / l if l > ZERO else ONE
                 tg = base_g / l if l > ZERO else ONE
                 tb = base_b / l if l > ZERO else ONE
-                r0 = (eta_it - ONE) / (eta_it + ONE)
-                r0 = r0 * r0
+                r0 = schlick_r0(eta_it)
                 if SPEC_TINT:
                     kd = (ONE - metallic) * (ONE - spec_tint) * f_diel
                     kt = (ONE - metallic) * spec_tint
@@ -396,7 +401,8 @@ def make_principled(lobes=ALL_LOBES):
 
         # ---- pdf ----
         if front:
-            p_spec = spec_weight(metallic, brdf, bsdf, eta, cos_o)
+            # (all metal without a dielectric part: the weight is 1, no Fresnel compiled)
+            p_spec = spec_weight(metallic, brdf, bsdf, eta, cos_o) if DIELECTRIC else ONE
             p_cc = QUARTER * clearcoat
             p_diff = brdf
         else:
@@ -454,7 +460,7 @@ def make_principled(lobes=ALL_LOBES):
         if front:
             p_cc = QUARTER * clearcoat
             p_diff = brdf
-            p_sp = spec_weight(metallic, brdf, bsdf, eta, cos_o)
+            p_sp = spec_weight(metallic, brdf, bsdf, eta, cos_o) if DIELECTRIC else ONE
         else:
             p_cc = ZERO
             p_diff = ZERO
