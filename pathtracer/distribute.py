@@ -26,9 +26,11 @@ is current per thread, so each GPU's backend lives in its own thread); the Ray p
 import dataclasses
 import itertools
 import os
+import queue
 import threading
 import time
-from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor
+import weakref
+from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor
 from concurrent.futures import wait as wait_futures
 from typing import NamedTuple
 
@@ -42,6 +44,10 @@ ITEMS_PER_WORKER = 4
 # (1, 2, 4 spp) are cut into fewer items.
 MIN_ITEM_SECONDS = 0.1
 IN_FLIGHT = 2            # items queued on each worker, so that it never waits for the driver
+# Pinned buffers per local GPU that an item's sums are copied into: the GPU's thread
+# launches the next item while another thread converts the last one to float64 (see
+# ThreadPool); two let the copy of one item overlap the conversion of the one before.
+STAGES = 2
 # A pass of a split render aims at this many seconds: longer than one device's passes,
 # so that the per-pass synchronisation of the workers costs little.
 PASS_SECONDS = 1.0
@@ -96,6 +102,7 @@ class ItemRenderer:
         self.base = None
         self.patch_key = None
         self.backend = None
+        self.stages = {}         # stage number -> pinned (sums, counts) (render's ``stage``)
         if device is not None:
             from numba import cuda
             cuda.select_device(device)
@@ -139,8 +146,12 @@ class ItemRenderer:
         return time.perf_counter() - t0
 
     def render(self, scene_key, box, patch_key, patch, item, seed, max_bounces, rr_depth,
-               active_rows=None):
-        """The item's sums (float32 rows x width x 3) and ray counts (int64, 3)."""
+               active_rows=None, stage=None):
+        """The item's sums (float32 rows x width x 3) and ray counts (int64, 3). ``stage``
+        (CUDA): the item is launched without waiting for it, its sums and counts are
+        copied into this worker's pinned buffers of that number, and the result is
+        (event, sums, counts): views of the buffers, filled once the CUDA event has
+        completed, and valid until the same stage is used again."""
         backend = self._use(scene_key, box, patch_key, patch)
         h = backend.scene.height
         r0, r1 = item.row0, item.row1
@@ -149,8 +160,15 @@ class ItemRenderer:
             mask = np.zeros((h, backend.scene.width), np.uint8)
             mask[r0:r1] = 1 if active_rows is None else active_rows
         if hasattr(backend, "render_rows"):       # CUDA: counts summed on the GPU
-            return backend.render_rows(item.sample0, item.n, seed, max_bounces, rr_depth,
-                                       r0, r1, mask)
+            if stage is None:
+                return backend.render_rows(item.sample0, item.n, seed, max_bounces,
+                                           rr_depth, r0, r1, mask)
+            buffers = self.stages.get(stage)
+            if buffers is None or buffers[0].shape != (h, backend.scene.width, 3):
+                buffers = self.stages[stage] = backend.stage_buffers()
+            done = backend.render_rows_async(item.sample0, item.n, seed, max_bounces,
+                                             rr_depth, r0, r1, mask, buffers)
+            return done, buffers[0][r0:r1], buffers[1]
         out, stats = backend.render_pass(item.sample0, item.n, seed, max_bounces, rr_depth,
                                          mask)
         # (one channel at a time: a strided reduction over the last axis is much slower)
@@ -161,38 +179,85 @@ class ItemRenderer:
         return self._use(scene_key, box, patch_key, patch).aovs(n_samples, seed)
 
 
-def _render_float64(worker, *args):
-    """A local GPU worker's item with its sums already float64: the conversion runs in the
-    worker's thread (NumPy releases the GIL), not in the driver's, which then only copies
-    or adds (measured: the driver's per-pass work is what the GPUs wait for)."""
-    sums, counts = worker.render(*args)
-    return sums.astype(np.float64), counts
+def _select_device(device):
+    """A converter thread's initializer: the GPU's context current (to wait for its
+    events)."""
+    if device is not None:
+        from numba import cuda
+        cuda.select_device(device)
 
 
 class ThreadPool:
     """Local workers, one thread each (every GPU's CUDA context and backend live in its
     thread). CPU workers take turns (a CPU backend already uses every core, and Numba's
     default threading layer runs one parallel region at a time): they serve tests of the
-    split itself, not speed."""
+    split itself, not speed.
+
+    A GPU worker's item runs in two steps: its thread launches the item, with the copies
+    of its sums and ray counts into a pinned stage buffer queued behind it on the GPU, and
+    takes the next item at once; a second thread of that worker waits for the copies and
+    converts the sums to the float64 array the driver adds (NumPy releases the GIL). The
+    GPU so always has the next item queued: the waits for an item's end, its copies and
+    conversion (~5 ms for a 1024^2 image) used to sit between two of its launches
+    (docs/benchmarks.md, "Two GPUs")."""
 
     def __init__(self, kinds):
         """``kinds``: one (backend name, CUDA device or None) per worker."""
         self.kinds = list(kinds)
         self.executors = [ThreadPoolExecutor(1, thread_name_prefix=f"pt-render-device{i}")
                           for i in range(len(self.kinds))]
+        self.converters = [ThreadPoolExecutor(1, thread_name_prefix=f"pt-render-sums{i}",
+                                              initializer=_select_device,
+                                              initargs=(device,))
+                           if name == "cuda" else None
+                           for i, (name, device) in enumerate(self.kinds)]
+        self.stages = [queue.SimpleQueue() for _ in self.kinds]
+        for q in self.stages:
+            for k in range(STAGES):
+                q.put(k)
         self.cpu_lock = threading.Lock()
+        self.closed = False
         self.workers = [ex.submit(ItemRenderer, name, device).result()
                         for ex, (name, device) in zip(self.executors, self.kinds)]
         self.label = ", ".join(f"{n}:{d}" if d is not None else n for n, d in self.kinds)
+        if any(name == "cuda" for name, _ in self.kinds):
+            _hold_at_exit(self)
 
     def __len__(self):
         return len(self.workers)
+
+    def _render_staged(self, w, args):
+        """A GPU item in two steps (see the class's docstring): a future of (float64 sums,
+        counts)."""
+        done = Future()
+        worker, stages, converter = self.workers[w], self.stages[w], self.converters[w]
+
+        def on_gpu():
+            stage = stages.get()             # waits while both stages are being converted
+            try:
+                copied, sums, counts = worker.render(*args, stage=stage)
+            except BaseException as e:
+                stages.put(stage)
+                done.set_exception(e)
+                return
+
+            def convert():
+                try:
+                    copied.synchronize()
+                    done.set_result((sums.astype(np.float64), counts.copy()))
+                except BaseException as e:
+                    done.set_exception(e)
+                finally:
+                    stages.put(stage)
+            converter.submit(convert)
+        self.executors[w].submit(on_gpu)
+        return done
 
     def submit(self, w, method, *args):
         worker = self.workers[w]
         if self.kinds[w][0] == "cuda":
             if method == "render":
-                return self.executors[w].submit(_render_float64, worker, *args)
+                return self._render_staged(w, args)
             return self.executors[w].submit(getattr(worker, method), *args)
 
         def locked():
@@ -211,8 +276,73 @@ class ThreadPool:
         return [scene]
 
     def close(self):
+        """End the threads, after the work queued on them (the GPU threads first: they
+        hand conversions on)."""
+        if self.closed:
+            return
+        self.closed = True
         for ex in self.executors:
             ex.shutdown(wait=True)
+        for c in self.converters:
+            if c is not None:
+                c.shutdown(wait=True)
+
+
+# Pools whose GPUs' deallocations are held at the interpreter's exit
+_gpu_pools = weakref.WeakSet()
+_exit_hook = []
+_held = []
+
+
+def _hold_deallocations():
+    """Hold this thread's context's pending deallocations: Numba then only queues the
+    frees and module unloads that finalizers ask for."""
+    from numba import cuda
+    cuda.synchronize()
+    held = cuda.current_context().deallocations.disable()
+    held.__enter__()            # (never left: the process is exiting)
+    _held.append(held)
+
+
+def _hold_gpu_deallocations():
+    """At the interpreter's exit, before the workers' threads are joined: each GPU's
+    context stops freeing (its pending deallocations held), and the process's exit gives
+    the driver's resources back. After a split render over two H200s, Numba's
+    exit-time finalizers unloading the kernels' modules aborted the process ("double
+    free or corruption") or crashed it, whatever context was current and also from the
+    worker's own thread with its context reset there (numba-cuda 0.30.4, 2026-11-26;
+    tests/test_gpu.py). Only at exit: a GPU's context is shared with every other thread
+    that uses that GPU."""
+    done = set()
+    for pool in list(_gpu_pools):
+        for (name, device), ex in zip(pool.kinds, pool.executors):
+            if name != "cuda" or device in done:
+                continue
+            done.add(device)
+            try:
+                if not pool.closed:
+                    ex.submit(_hold_deallocations).result()
+                else:   # (its threads have ended: the device's context, from this one)
+                    from numba import cuda
+                    with cuda.gpus[device]:
+                        _hold_deallocations()
+            except Exception:      # (a worker broken, a device gone: nothing to save)
+                pass
+
+
+def _hold_at_exit(pool):
+    """Register _hold_gpu_deallocations (once) with the hook that concurrent.futures itself
+    uses: threading's exit hooks run last-in first-out before the threads are joined, so
+    the workers' threads still take work."""
+    if not _exit_hook:
+        _exit_hook.append(_hold_gpu_deallocations)
+        register = getattr(threading, "_register_atexit", None)
+        if register is not None:
+            try:
+                register(_hold_gpu_deallocations)
+            except RuntimeError:      # (called during the interpreter's exit)
+                pass
+    _gpu_pools.add(pool)
 
 
 def _same(a, b):
@@ -275,10 +405,14 @@ class SplitBackend:
         return f"{len(self.pool)} workers ({self.pool.label})"
 
     def compile(self):
-        """Compile (or load from the disk cache) on every worker at once."""
-        handles = [self.pool.submit(w, "compile", *self._args())
-                   for w in range(len(self.pool))]
-        self.compile_seconds = [self.pool.result(h) for h in handles]
+        """Compile (or load from the disk cache) the kernels on every worker, one worker
+        after another (a worker's compile launches every kernel a render uses, which
+        loads them into its GPU's context): two threads loading the same Numba kernels
+        into two contexts at once is not known to be safe in numba-cuda, and this order
+        is the one tested on two GPUs. The cost is the second GPU's load from the disk
+        cache, not counted as rendering."""
+        self.compile_seconds = [self.pool.result(self.pool.submit(w, "compile", *self._args()))
+                                for w in range(len(self.pool))]
 
     def aovs(self, n_samples, seed):
         return self.pool.result(self.pool.submit(0, "aovs", *self._args(), n_samples, seed))
@@ -292,7 +426,7 @@ class SplitBackend:
 
     def render_pass(self, sample_start, n_samples, seed, max_bounces, rr_depth, active=None):
         """The pass's sums (float64 H x W x 3: a buffer reused by the next pass, as the
-        CUDA backend's is) and ray counts (1 x 1 x 3)."""
+        CUDA backend's is, or the first item's array) and ray counts (1 x 1 x 3)."""
         h, w = self.scene.height, self.scene.width
         workers = len(self.pool)
         per_worker = 1
@@ -301,16 +435,15 @@ class SplitBackend:
             per_worker = int(min(self.items_per_worker, max(1, seconds / MIN_ITEM_SECONDS)))
         items = split_pass(h, sample_start, n_samples, per_worker * workers)
         t0 = time.perf_counter()
-        if self._total is None or self._total.shape != (h, w, 3):
-            self._total = np.empty((h, w, 3), np.float64)
-        total = self._total
+        total = None
         # The first items cut by rows (one sample chunk) cover every row once: they are
         # copied, not added to zeros (0 + x is x: the same sums, without a 24 MB fill per
-        # pass of a 1024^2 image).
+        # pass of a 1024^2 image); a first item of every row that is already float64 (a
+        # GPU worker's, converted in its thread) becomes the pass's sums, not copied.
         first_chunk = sum(1 for it in items if it.sample0 == items[0].sample0)
         stats = np.zeros(3, np.int64)
         args = self._args()
-        queue = list(range(len(items)))[::-1]      # popped from the end: item order
+        todo = list(range(len(items)))[::-1]       # popped from the end: item order
         flying = {}                                 # handle -> (worker, item index)
         load = [0] * len(self.pool)
         results = {}
@@ -319,8 +452,8 @@ class SplitBackend:
         def feed():     # round robin: every worker gets an item before any gets two
             for wk in [wk for depth in range(IN_FLIGHT) for wk in range(workers)
                        if load[wk] <= depth]:
-                if queue and load[wk] < IN_FLIGHT:
-                    i = queue.pop()
+                if todo and load[wk] < IN_FLIGHT:
+                    i = todo.pop()
                     it = items[i]
                     rows = None if active is None else active[it.row0:it.row1]
                     handle = self.pool.submit(wk, "render", *args, it, seed, max_bounces,
@@ -339,7 +472,14 @@ class SplitBackend:
             while added in results:                 # in item order: a fixed rounding
                 it = items[added]
                 sums, counts = results.pop(added)
-                if added < first_chunk:
+                if first_chunk == 1 and added == 0 and sums.dtype == np.float64 and \
+                        sums.shape == (h, w, 3):
+                    total = sums
+                elif added < first_chunk:
+                    if total is None:
+                        if self._total is None or self._total.shape != (h, w, 3):
+                            self._total = np.empty((h, w, 3), np.float64)
+                        total = self._total
                     total[it.row0:it.row1] = sums
                 else:
                     total[it.row0:it.row1] += sums

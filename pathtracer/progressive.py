@@ -25,6 +25,8 @@ class RenderResult:
     passes: list = field(default_factory=list)   # (elapsed s, spp) after each pass
 
 
+# A headless render's pass grows at most this many times over the last one's samples
+HEADLESS_GROWTH = 64
 # Adaptive sampling: every pixel takes this many samples before its error is judged
 ADAPTIVE_MIN_SPP = 16
 RELMSE_EPS = 0.01       # the relMSE metric's denominator term (film.relmse)
@@ -104,8 +106,9 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
     Pass sizes start at ``first_pass`` spp (1: the image refreshes quickly at first; a
     caller that shows no intermediate image starts larger, as each pass costs a launch and
     a copy) and double while a pass is shorter than ``pass_seconds``, so overhead stays
-    small later; ``headless`` (nobody sees the intermediate images): they grow 4x while 4x
-    stays under ``pass_seconds``, as every pass costs a synchronisation, a copy and the
+    small later; ``headless`` (nobody sees the intermediate images): every pass after the
+    first is aimed at ``pass_seconds`` from the last pass's speed (adaptive renders: 4x
+    growth while 4x stays under it), as every pass costs a synchronisation, a copy and the
     film's sum (~10-20 ms for a 1024^2 image, which is what a split render over several
     GPUs waits for at each pass). ``on_pass(film, elapsed)`` is called after every pass
     (returning False ends the render). Ctrl-C (or any :class:`~.errors.Interrupted`)
@@ -208,7 +211,12 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
                 result.stopped = True
                 break
             # Grow the pass while it is short; aim the last pass at the time limit.
-            if headless and dt < pass_seconds / 4:
+            if headless and not adaptive:
+                # nobody waits for an image: aim the next pass at pass_seconds from this
+                # one's speed (at most HEADLESS_GROWTH times larger: a first pass of a few
+                # ms is timed coarsely, and includes the launch and copy)
+                n = max(1, int(min(HEADLESS_GROWTH * n, n * pass_seconds / max(dt, 1e-6))))
+            elif headless and dt < pass_seconds / 4:
                 n *= 4
             elif dt < pass_seconds:
                 n *= 2

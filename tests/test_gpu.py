@@ -217,3 +217,31 @@ def test_split_over_gpus_equals_one_gpu():
     c = pt.render(scene, spp=96, backend="cuda", devices=devices, adaptive=0.01)
     d = pt.render(scene, spp=96, backend="cuda", adaptive=0.01)
     assert_same_render(d, c)
+
+
+EXIT_AFTER_SPLIT = """
+import os
+import pathtracer as pt
+for name, res in (("cornell-box", (512, 512)), ("principled-grid", (512, 384))):
+    scene = pt.load_scene(os.path.join("scenes", name + ".json"),
+                          _overrides={"resolution": res})
+    pt.render(scene, spp=64, backend="cuda")
+    devices = "all" if len(__import__("numba").cuda.gpus) > 1 else [0, 0]
+    r = pt.render(scene, spp=256, backend="cuda", devices=devices)
+    assert min(r.shares) > 0
+print("rendered")
+"""
+
+
+@gpu
+def test_process_exits_cleanly_after_a_split_render():
+    """A process that rendered over several GPUs (the megakernel's Cornell box and a
+    wavefront scene with an HDRI) exits with status 0. Before the pool released its
+    workers' CUDA objects in their own threads at exit, `python -m bench.distributed gpus`
+    aborted at exit with "double free or corruption" (2x H200, 2026-11-26)."""
+    import subprocess
+    import sys
+    from tests.conftest import ROOT
+    p = subprocess.run([sys.executable, "-c", EXIT_AFTER_SPLIT], cwd=ROOT,
+                       capture_output=True, text=True, timeout=900)
+    assert p.returncode == 0 and "rendered" in p.stdout, (p.returncode, p.stderr[-3000:])

@@ -290,3 +290,54 @@ def test_cpu_pass_kernels_are_cacheable():
              glob.glob(os.path.join(_cache._state["folder"], "**", "*.nbi"), recursive=True)]
     assert any("render_pass" in n and "cpu" in n for n in names), names[:20]
     assert any("aov_pass" in n and "cpu" in n for n in names), names[:20]
+
+
+def test_headless_passes_aim_at_pass_seconds(monkeypatch):
+    """A render nobody watches sizes each pass after the first from the last pass's speed,
+    so that it lasts about pass_seconds (at most HEADLESS_GROWTH times the last pass's
+    samples): few passes, each of which costs a synchronisation. Timed with a fake clock
+    that a fake backend advances by a fixed cost per pass plus a cost per sample."""
+    from pathtracer import progressive
+    clock = [0.0]
+    monkeypatch.setattr(progressive.time, "perf_counter", lambda: clock[0])
+    scene = load_scene(CORNELL)
+    h, w = scene.height, scene.width
+    fixed, per_sample, pass_seconds = 0.002, 1e-4, 0.1
+
+    class Fake:
+        name = "fake"
+
+        def __init__(self):
+            self.scene = scene
+            self.sizes = []
+
+        def update(self, s):
+            self.scene = s
+
+        def compile(self):
+            pass
+
+        def render_pass(self, sample_start, n, seed, max_bounces, rr_depth, active=None):
+            assert sample_start == sum(self.sizes)       # the samples follow each other
+            self.sizes.append(n)
+            clock[0] += fixed + n * per_sample
+            return np.zeros((h, w, 3)), np.zeros((1, 1, 3), np.int64)
+
+    b = Fake()
+    r = render(scene, b, spp=5000, pass_seconds=pass_seconds, first_pass=4, headless=True)
+    assert r.film.spp == 5000 and sum(b.sizes) == 5000
+    assert b.sizes[0] == 4
+    # the second pass from the first's speed (fixed cost included): 4 * 0.1 / 0.0024
+    assert b.sizes[1] == min(progressive.HEADLESS_GROWTH * 4, int(4 * pass_seconds / 0.0024))
+    # then (the fixed cost counted as samples at first) 85-100 % of pass_seconds, within
+    # 2 % from the fourth pass on (the last pass: what is left)
+    for k, n in enumerate(b.sizes[2:-1], 2):
+        seconds = fixed + n * per_sample
+        assert 0.85 * pass_seconds < seconds <= pass_seconds, b.sizes
+        assert k < 3 or seconds > 0.98 * pass_seconds, b.sizes
+    assert len(b.sizes) <= 2 + 5000 * per_sample / (pass_seconds - fixed) + 1
+    # the growth cap: a first pass timed at almost nothing
+    b2, fixed, per_sample = Fake(), 1e-6, 1e-9
+    render(scene, b2, spp=3000, pass_seconds=pass_seconds, first_pass=1, headless=True)
+    assert all(b < a * progressive.HEADLESS_GROWTH + 1 for a, b in zip(b2.sizes, b2.sizes[1:]))
+    assert b2.sizes[:3] == [1, 64, 2935]

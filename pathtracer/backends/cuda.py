@@ -237,6 +237,15 @@ def sum_stats(stats, totals):
             cuda.atomic.add(totals, c, acc)
 
 
+@cuda.jit(cache=jit_cache())
+def zero_int64(a):
+    """a[:] = 0 on the GPU (in launch order: no wait for the host, unlike a copy from
+    pageable host memory, which waits for the GPU)."""
+    i = cuda.grid(1)
+    if i < a.shape[0]:
+        a[i] = 0
+
+
 def _same(new, old):
     """Whether a re-compiled scene array equals the one already on the GPU: memoised arrays
     are the same object; small ones re-built from the description (materials, camera,
@@ -300,6 +309,7 @@ class CUDABackend:
         self.d_stats = cuda.device_array((h, w, 3), np.int32)
         self._parts = None   # scratch film (float sums, ray counts), see _scratch
         self._totals = None  # a work item's ray counts (render_rows)
+        self._copies = None  # the stream of render_rows_async's copies
         self._halves = None  # the second half's film of render_halves (device, host)
         self.d_all_pixels = cuda.to_device(np.ones((h, w), np.uint8))
         self._compiled = False
@@ -393,15 +403,19 @@ class CUDABackend:
     def _totals_of_pass(self, d_stats=None):
         """The pass's ray counts summed on the GPU (int64, 3): a few bytes copied instead
         of H x W x 3 counts and three strided sums on the host."""
+        self._sum_totals(d_stats)
+        self._totals.copy_to_host(self._totals_host)
+        return self._totals_host
+
+    def _sum_totals(self, d_stats=None):
+        """Launch the sum of the pass's ray counts into self._totals (no wait)."""
         if self._totals is None:
             self._totals = cuda.device_array(3, np.int64)
             self._totals_host = cuda.pinned_array(3, np.int64)
-        self._totals.copy_to_device(np.zeros(3, np.int64))
+        zero_int64[1, 32](self._totals)
         # (128 blocks at least: fewer make Numba warn of low occupancy)
         sum_stats[max(128, (self.scene.height + 31) // 32), 32](
             self.d_stats if d_stats is None else d_stats, self._totals)
-        self._totals.copy_to_host(self._totals_host)
-        return self._totals_host
 
     def render_pass_totals(self, sample_start, n_samples, seed, max_bounces, rr_depth,
                            active=None):
@@ -460,6 +474,32 @@ class CUDABackend:
         rows = self.out[row0:row1]                   # pinned: the fastest copy
         self.d_out[row0:row1].copy_to_host(rows)
         return np.array(rows), totals
+
+    def stage_buffers(self):
+        """Host buffers for render_rows_async: a pinned float32 H x W x 3 film and three
+        pinned ray counts."""
+        return (cuda.pinned_array((self.scene.height, self.scene.width, 3), np.float32),
+                cuda.pinned_array(3, np.int64))
+
+    def render_rows_async(self, sample_start, n_samples, seed, max_bounces, rr_depth, row0,
+                          row1, active, stage):
+        """render_rows without waiting for the GPU: the pass is launched, and the copies of
+        rows [row0, row1) of its sums and of its ray counts into ``stage``
+        (stage_buffers()) are queued behind it; returns a CUDA event that completes when
+        they have landed. The next launch may follow at once (it waits on the GPU for the
+        copies: they run on a stream of their own, which synchronises with the default
+        stream that the kernels run on), so the GPU is not idle while the host takes an
+        item's sums (a split render, pathtracer.distribute)."""
+        if self._copies is None:
+            self._copies = cuda.stream()
+        film, totals = stage
+        self.launch(sample_start, n_samples, seed, max_bounces, rr_depth, active)
+        self._sum_totals()
+        self._totals.copy_to_host(totals, stream=self._copies)
+        self.d_out[row0:row1].copy_to_host(film[row0:row1], stream=self._copies)
+        done = cuda.event(timing=False)
+        done.record(stream=self._copies)
+        return done
 
     def aovs(self, n_samples, seed):
         """The denoiser's albedo and normal images (float32 H x W x AOV_WIDTH, see aov_pixel)."""
