@@ -1,6 +1,8 @@
-"""A/B of the headless pass ramp (progressive.render's ``headless``: passes grow 4x while
-4x stays under pass_seconds, instead of 2x) on whole renders through the Python API,
-both behaviours alternating in one process, the median of 5 after a warm-up of each.
+"""A/B of the headless pass ramp (progressive.render's ``headless``: passes aimed at
+pass_seconds from the last pass's speed since 2026-11-26, 4x growth while 4x stayed under
+pass_seconds before; against doubling) on whole renders through the Python API, both
+behaviours alternating in one process, the median of 5 after a warm-up of each. (The
+label "ramp4" is the headless rule, whichever it is.)
 
     python -m bench.headless_ramp OUT.json   (needs the CUDA backend)
 """
