@@ -223,6 +223,15 @@ class ThreadPool:
         if any(name == "cuda" for name, _ in self.kinds):
             _hold_at_exit(self)
 
+    # Workers compile one after another (SplitBackend.compile): a worker's compile
+    # launches every kernel a render uses, which loads them into its GPU's context; two
+    # threads loading the same Numba kernels into two contexts at once is not known to be
+    # safe in numba-cuda, and this order is the one tested on two GPUs. Its cost was not
+    # measurable: the split's compile after a one-GPU render of the scene took 0.041 /
+    # 0.052 s in this order and 0.047 / 0.055 s at once (Cornell / bunny-studio, two
+    # H200s, bench/results/distributed-gpus-h200x2*.json, 2026-11-26).
+    one_at_a_time = True
+
     def __len__(self):
         return len(self.workers)
 
@@ -405,14 +414,17 @@ class SplitBackend:
         return f"{len(self.pool)} workers ({self.pool.label})"
 
     def compile(self):
-        """Compile (or load from the disk cache) the kernels on every worker, one worker
-        after another (a worker's compile launches every kernel a render uses, which
-        loads them into its GPU's context): two threads loading the same Numba kernels
-        into two contexts at once is not known to be safe in numba-cuda, and this order
-        is the one tested on two GPUs. The cost is the second GPU's load from the disk
-        cache, not counted as rendering."""
-        self.compile_seconds = [self.pool.result(self.pool.submit(w, "compile", *self._args()))
-                                for w in range(len(self.pool))]
+        """Compile (or load from the disk cache) the kernels on every worker: at once, or
+        one worker after another where the pool asks for it (``pool.one_at_a_time``: the
+        GPUs of this process, see ThreadPool)."""
+        n = len(self.pool)
+        if getattr(self.pool, "one_at_a_time", False):
+            self.compile_seconds = [self.pool.result(self.pool.submit(w, "compile",
+                                                                      *self._args()))
+                                    for w in range(n)]
+            return
+        handles = [self.pool.submit(w, "compile", *self._args()) for w in range(n)]
+        self.compile_seconds = [self.pool.result(h) for h in handles]
 
     def aovs(self, n_samples, seed):
         return self.pool.result(self.pool.submit(0, "aovs", *self._args(), n_samples, seed))
