@@ -211,8 +211,9 @@ class ThreadPool:
                                               initargs=(device,))
                            if name == "cuda" else None
                            for i, (name, device) in enumerate(self.kinds)]
-        self.stages = [queue.SimpleQueue() for _ in self.kinds]
-        for q in self.stages:
+        # per worker, the numbers of its stage buffers not in use (ItemRenderer.stages)
+        self.free_stages = [queue.SimpleQueue() for _ in self.kinds]
+        for q in self.free_stages:
             for k in range(STAGES):
                 q.put(k)
         self.cpu_lock = threading.Lock()
@@ -239,7 +240,7 @@ class ThreadPool:
         """A GPU item in two steps (see the class's docstring): a future of (float64 sums,
         counts)."""
         done = Future()
-        worker, stages, converter = self.workers[w], self.stages[w], self.converters[w]
+        worker, stages, converter = self.workers[w], self.free_stages[w], self.converters[w]
 
         def on_gpu():
             stage = stages.get()             # waits while both stages are being converted
@@ -299,11 +300,12 @@ class ThreadPool:
 
 # Pools whose GPUs' deallocations are held at the interpreter's exit
 _gpu_pools = weakref.WeakSet()
-_exit_hook = []
+_exit_hook = []      # (one entry once the hook is registered)
+# The holds entered at exit: kept alive, as a hold collected as garbage would end itself
 _held = []
 
 
-def _hold_deallocations():
+def _hold_this_context():
     """Hold this thread's context's pending deallocations: Numba then only queues the
     frees and module unloads that finalizers ask for."""
     from numba import cuda
@@ -330,11 +332,11 @@ def _hold_gpu_deallocations():
             done.add(device)
             try:
                 if not pool.closed:
-                    ex.submit(_hold_deallocations).result()
+                    ex.submit(_hold_this_context).result()
                 else:   # (its threads have ended: the device's context, from this one)
                     from numba import cuda
                     with cuda.gpus[device]:
-                        _hold_deallocations()
+                        _hold_this_context()
             except Exception:      # (a worker broken, a device gone: nothing to save)
                 pass
 

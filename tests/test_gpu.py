@@ -236,9 +236,10 @@ print("rendered")
 @gpu
 def test_process_exits_cleanly_after_a_split_render():
     """A process that rendered over several GPUs (the megakernel's Cornell box and a
-    wavefront scene with an HDRI) exits with status 0. Before the pool released its
-    workers' CUDA objects in their own threads at exit, `python -m bench.distributed gpus`
-    aborted at exit with "double free or corruption" (2x H200, 2026-11-26)."""
+    wavefront scene with an HDRI) exits with status 0. Before the pool held its GPUs'
+    pending deallocations at exit (distribute._hold_gpu_deallocations), numba-cuda's
+    exit-time module unloads aborted such a process with "double free or corruption"
+    (`python -m bench.distributed gpus` and this test, 2x H200, 2026-11-26)."""
     import subprocess
     import sys
     from tests.conftest import ROOT
