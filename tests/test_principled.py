@@ -10,7 +10,7 @@ from numba import njit
 
 from pathtracer.kernels.layout import P_FIELDS
 from pathtracer.kernels.principled import (ALL_LOBES, Lobes, make_principled, principled_eval,
-                                           principled_sample)
+                                           principled_sample, reuse_sample)
 from pathtracer.kernels.rng import path_key, sample_1d
 from tests.helpers import chi2_test, principled_params as params
 
@@ -255,3 +255,23 @@ def test_lobes_compiled_out_change_nothing(on):
     assert np.array_equal(ev, ev_full, equal_nan=True)
     assert np.array_equal(sm, sm_full, equal_nan=True)
     assert (ev_full[:, 3] > 0).sum() > n // 4 and (sm_full[:, 6] > 0).sum() > n // 4
+
+
+def test_lobe_choice_keeps_each_lobes_numbers_stratified():
+    """The lobe is chosen by the direction's first number and that number stretched back
+    (reuse_sample): numbers stratified one per 1/64 give each lobe numbers stratified one per
+    1/(its count), which a separate lobe number would not."""
+    rng = np.random.default_rng(3)
+    u = (np.arange(64) + rng.random(64)) / 64
+    shares = [(0.0, 0.5), (0.5, 0.25), (0.75, 0.25)]     # (start, width) of total 1
+    for start, width in shares:
+        mine = u[(u >= start) & (u < start + width)]
+        got = np.array([reuse_sample(np.float32(x), np.float32(start), np.float32(width))
+                        for x in mine])
+        assert len(got) == round(64 * width)
+        assert ((got >= 0) & (got < 1)).all()
+        assert sorted(np.floor(got * len(got)).astype(int)) == list(range(len(got)))
+    # a lobe number drawn apart: the diffuse lobe's direction numbers are not so spread
+    pick = rng.random(64) < 0.5
+    assert len(np.unique(np.floor(u[pick] * pick.sum()))) < pick.sum()
+    assert reuse_sample(np.float32(1.0), np.float32(0.0), np.float32(1.0)) < 1.0

@@ -260,7 +260,7 @@ D_LIGHT_V = 1
 D_LIGHT_SELECT = 2    # which light; dimension 3 of the set is unused
 D_BSDF_U = 4          # BSDF set: direction
 D_BSDF_V = 5
-D_BSDF_LOBE = 6       # which lobe
+D_BSDF_LOBE = 6       # reflection or refraction (the lobe: by reusing D_BSDF_U)
 D_RR = 7              # Russian roulette
 DIMS_PER_BOUNCE = 8
 

@@ -24,7 +24,8 @@ Dimension layout of one path (``kernels.layout``, D_*): dimensions come in sets 
 the sobol sampler draws each set from the 4-D Sobol sequence with its own index shuffle
 (Burley's padding): set 0 is the camera (pixel x, pixel y, lens u, lens v); every
 scattering event then has two sets, the light sample (position u, v, light pick) and the BSDF
-sample (direction u, v, lobe pick, Russian roulette).
+sample (direction u, v, reflection or refraction, Russian roulette: the principled BSDF picks
+its lobe by reusing u, ``principled.reuse_sample``).
 """
 import inspect
 

@@ -72,10 +72,10 @@ def make_scatter(features, target="cpu"):
         return diffuse_eval_local(base_color(params), wo_l, wi_l)
 
     @step
-    def material_sample(is_principled, params, wo_l, u_lobe, u1, u2):
+    def material_sample(is_principled, params, wo_l, u_choice, u1, u2):
         if PRINCIPLED:
             if is_principled:
-                return principled_sample(params, wo_l, u_lobe, u1, u2)
+                return principled_sample(params, wo_l, u_choice, u1, u2)
         return diffuse_sample_local(base_color(params), wo_l, u1, u2)
 
     @step
@@ -103,12 +103,12 @@ def make_scatter(features, target="cpu"):
         return f, pdf
 
     @step
-    def mapped_sample(is_principled, params, wp, wo_l, u_lobe, u1, u2):
+    def mapped_sample(is_principled, params, wp, wo_l, u_choice, u1, u2):
         """(wi, weight, pdf) of mapped_eval: the material sampled in the mapped frame, a
         direction on the wrong side of the smooth surface mirrored across it."""
         tm, bm = mapped_frame(wp)
         wi_m, weight, pdf = material_sample(is_principled, params, to_local(wo_l, tm, bm, wp),
-                                            u_lobe, u1, u2)
+                                            u_choice, u1, u2)
         if not (pdf > ZERO):
             return wi_m, weight, ZERO
         wi = to_world(wi_m, tm, bm, wp)
@@ -136,11 +136,11 @@ def make_scatter(features, target="cpu"):
         return material_eval(is_principled, params, wo_l, wi_l)
 
     @step
-    def bsdf_sample(is_principled, params, wp, wo_l, u_lobe, u1, u2):
+    def bsdf_sample(is_principled, params, wp, wo_l, u_choice, u1, u2):
         if NORMAL_MAP:
             if wp[2] < NM_FLAT_COS:
-                return mapped_sample(is_principled, params, wp, wo_l, u_lobe, u1, u2)
-        return material_sample(is_principled, params, wo_l, u_lobe, u1, u2)
+                return mapped_sample(is_principled, params, wp, wo_l, u_choice, u1, u2)
+        return material_sample(is_principled, params, wo_l, u_choice, u1, u2)
 
     @step
     def local_wo(wo, t, s, n):
@@ -185,11 +185,11 @@ def make_scatter(features, target="cpu"):
         return f, pdf
 
     @step
-    def sample_world(is_principled, params, wo, wo_l, t, s, n, ng, wp, u_lobe, u1, u2):
+    def sample_world(is_principled, params, wo, wo_l, t, s, n, ng, wp, u_choice, u1, u2):
         """(wi, weight = f |cos| / pdf, pdf) of a sampled world direction; pdf = 0: the
         path is absorbed. A direction on the wrong side of the geometric surface is folded
         back (see eval_world), whose effective BSDF and pdf then give the weight."""
-        wi_l, weight, pdf_bsdf = bsdf_sample(is_principled, params, wp, wo_l, u_lobe, u1, u2)
+        wi_l, weight, pdf_bsdf = bsdf_sample(is_principled, params, wp, wo_l, u_choice, u1, u2)
         if not (pdf_bsdf > ZERO):
             return wi_l, weight, ZERO
         wi = to_world(wi_l, t, s, n)   # unit: orthonormal frame
