@@ -275,3 +275,11 @@ def test_lobe_choice_keeps_each_lobes_numbers_stratified():
     pick = rng.random(64) < 0.5
     assert len(np.unique(np.floor(u[pick] * pick.sum()))) < pick.sum()
     assert reuse_sample(np.float32(1.0), np.float32(0.0), np.float32(1.0)) < 1.0
+    # and principled_sample picks its lobe so: without transmission the third number
+    # changes nothing (with a separate lobe number it chose between diffuse and specular)
+    p = params(clearcoat=0.5, sheen=0.3)
+    wo = direction(0.6)
+    for u1, u2 in rng.random((32, 2)).astype(np.float32):
+        a = principled_sample(p, wo, np.float32(0.05), u1, u2)
+        b = principled_sample(p, wo, np.float32(0.95), u1, u2)
+        assert np.array_equal(np.array(a[0] + a[1] + (a[2],)), np.array(b[0] + b[1] + (b[2],)))
