@@ -82,7 +82,8 @@ def convergence_ours(backend_name, name, max_spp, adaptive=None):
         points.append((p.elapsed - measuring[0], p.spp, relmse(p.image(), ref)))
         measuring[0] += time.perf_counter() - t0
 
-    # passes of 1, 2, 4, ... spp: the error is measured at doubling sample counts
+    # passes doubling from the API's first pass (1 spp on the CPU; on the GPU the spp of
+    # api.PREVIEW_FIRST_PASS_PATHS paths, 8 at these sizes): the error is measured after each
     pt.render(scene, spp=max_spp, backend=backend_name, callback=on_pass,
               pass_seconds=float("inf"), adaptive=adaptive)
     return points
@@ -623,8 +624,8 @@ def summary(r, res, args):
                   "Mitsuba 3's reference (shared/reference) for both renderers. The others: "
                   "each renderer's own high-spp reference (`bench/references/`), so each "
                   "curve is that renderer's noise alone. `pt-render B`: one progressive "
-                  "render (passes of 1, 2, 4, ... spp, the error measured after each and its "
-                  "time taken out); `pt-render B per level` and Mitsuba: each spp level "
+                  "render (passes doubling from 1 spp on the CPU, from 8 spp on the GPU at these "
+                  "sizes, the error measured after each and its time taken out); `pt-render B per level` and Mitsuba: each spp level "
                   "rendered alone.", "",
                   "| scene | renderer | time to relMSE 1e-2 | time to relMSE 1e-3 | "
                   "last spp | last seconds | last relMSE | reference noise |",

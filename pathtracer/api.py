@@ -30,6 +30,23 @@ DICT_NAME = "<scene dict>"     # how error messages name a scene given as a dict
 # fraction of a second (2^23 paths: ~10-30 ms on an H100). A split render's workers take
 # this each (distribute.SplitBackend.first_pass_paths).
 FIRST_PASS_PATHS = {"cuda": 1 << 23, "cpu": 1 << 17}
+# Paths in the first pass of a render whose passes are seen (a callback: the command's
+# progress line and saves, the live preview), per backend (others: 1 spp). On the GPU a pass
+# too small to fill it costs almost what one of this size costs (Cornell box 256^2 on an
+# H200: 1 spp 0.72 ms, 8 spp 1.71 ms a pass; 2026-11-26, docs/benchmarks.md), so starting
+# at 1 spp spent a small image's first milliseconds on thin waves: 1, 2, 4 and 8 spp took
+# 5.0 ms where one pass of 8 took 1.7. A first image ~1-2 ms later is not seen. The CPU's
+# pass time grows with its samples: it starts at 1 spp.
+PREVIEW_FIRST_PASS_PATHS = {"cuda": 1 << 19}
+
+
+def first_pass_spp(spp, pixels, most):
+    """The first pass's samples per pixel: the largest power of 2 whose paths (times
+    ``pixels``) stay within ``most`` and that is at most ``spp`` (None: any), at least 1."""
+    n = 1
+    while (spp is None or n * 2 <= spp) and n * 2 * pixels <= most:
+        n *= 2
+    return n
 
 
 # ---------------------------------------------------------------------------------------
@@ -539,14 +556,14 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
         spp = film.spp          # a resumed render already there: nothing more to render
     if pass_seconds is None:
         pass_seconds = getattr(be, "pass_seconds", 0.25 if be.name == "cuda" else 0.5)
-    first_pass = 1
     headless = callback is None and time is None and spp is not None
     if headless:
         # Nobody sees the intermediate images: start with a pass of up to FIRST_PASS_PATHS
         # paths (a power of 2 spp), so a small re-render is one or two launches, not log2(spp).
         most = getattr(be, "first_pass_paths", FIRST_PASS_PATHS.get(be.name, 0))
-        while first_pass * 2 <= spp and first_pass * 2 * pixels <= most:
-            first_pass *= 2
+    else:
+        most = PREVIEW_FIRST_PASS_PATHS.get(be.name, 0)
+    first_pass = first_pass_spp(spp, pixels, most)
     before = (0, 0, 0) if film is None else (film.camera_rays, film.bounce_rays,
                                              film.shadow_rays)
     r = progressive(c, be, spp=spp, time_limit=time, seed=seed, max_bounces=max_bounces,

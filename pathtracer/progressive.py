@@ -103,9 +103,9 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
     """Render ``scene`` with ``backend`` until ``spp`` samples per pixel or ``time_limit``
     seconds, whichever comes first (spp defaults to the scene's unless a time is given).
 
-    Pass sizes start at ``first_pass`` spp (1: the image refreshes quickly at first; a
-    caller that shows no intermediate image starts larger, as each pass costs a launch and
-    a copy) and double while a pass is shorter than ``pass_seconds``, so overhead stays
+    Pass sizes start at ``first_pass`` spp (1: the image refreshes quickly at first;
+    api.render starts a GPU's at a pass that fills it, and a caller that shows no
+    intermediate image larger still, as each pass costs a launch and a copy) and double while a pass is shorter than ``pass_seconds``, so overhead stays
     small later; ``headless`` (nobody sees the intermediate images): every pass after the
     first is aimed at ``pass_seconds`` from the last pass's speed (adaptive renders: 4x
     growth while 4x stays under it), as every pass costs a synchronisation, a copy and the

@@ -133,6 +133,36 @@ def test_callback_stops_the_render_and_sees_progress():
     r = pt.render(scene, spp=4096, backend="cpu", callback=cb)
     assert r.interrupted and r.spp == seen[-1] and 4 <= r.spp < 4096
     assert seen == sorted(seen)
+    assert seen[0] == 1          # the CPU's first seen pass: one sample per pixel
+
+
+def test_first_pass_spp():
+    """A render's first pass: the largest power of 2 spp within the paths allowed and the
+    samples asked for, at least 1 (api.PREVIEW_FIRST_PASS_PATHS, FIRST_PASS_PATHS)."""
+    from pathtracer.api import first_pass_spp
+    assert first_pass_spp(64, 256 * 256, 1 << 19) == 8
+    assert first_pass_spp(64, 256 * 192, 1 << 19) == 8          # 10.7 would overshoot
+    assert first_pass_spp(4, 256 * 256, 1 << 19) == 4            # no more than asked
+    assert first_pass_spp(6, 256 * 256, 1 << 19) == 4
+    assert first_pass_spp(None, 256 * 256, 1 << 19) == 8         # a time-limited render
+    assert first_pass_spp(None, 1024 * 1024, 1 << 19) == 1       # never below 1
+    assert first_pass_spp(4096, 432, 0) == 1
+    assert first_pass_spp(1, 10, 1 << 30) == 1
+
+
+@pytest.mark.skipif(not __import__("pathtracer.backends", fromlist=["x"]).cuda_available(),
+                    reason="no CUDA GPU")
+def test_cuda_callback_starts_with_a_pass_that_fills_the_gpu():
+    from pathtracer.api import PREVIEW_FIRST_PASS_PATHS, first_pass_spp
+    scene = pt.load_scene(room())
+    seen = []
+
+    def cb(p):
+        seen.append(p.spp)
+        return len(seen) < 3
+    pt.render(scene, spp=4096, backend="cuda", callback=cb)
+    first = first_pass_spp(4096, 24 * 18, PREVIEW_FIRST_PASS_PATHS["cuda"])
+    assert first > 1 and seen[:2] == [first, 3 * first]
 
 
 def test_result_save_and_repr_png(tmp_path):
