@@ -72,6 +72,10 @@ VARIANTS = {
     "wave-l3": dict(wavefront=dict(wave_levels=3)),
     "wave-l4": dict(wavefront=dict(wave_levels=4)),
     "wave-all": dict(wavefront=dict(wave_levels=None)),
+    # the hit queue sorted by material kind (backends.wavefront's sort_hits, the default
+    # since 2026-11-26) or not
+    "wave-sort": dict(wavefront=dict(sort_hits=True)),
+    "wave-unsorted": dict(wavefront=dict(sort_hits=False)),
 }
 
 

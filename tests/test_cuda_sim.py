@@ -65,6 +65,22 @@ for name, be in [("megakernel", CUDABackend(s, wavefront=False)),
                         totals_equal=bool((ta1 == ta2).all() and (tb1 == tb2).all()),
                         differ=bool((a1 != b1).any()), sum=float(a1.sum() + b1.sum()))
 out["halves"] = halves
+# The hit queue sorted by material kind (backends.wavefront's sort_hits): a scene with
+# diffuse and principled materials, the same numbers bit for bit as one unsorted queue
+g = load_scene_description(sys.argv[1] + "/scenes/glass.json")
+g.camera.resolution = (6, 5)
+gs = compile_scene(g)
+sort = {}
+for flag in (True, False):
+    be = CUDABackend(gs, wavefront=dict(wave_levels=None, sort_hits=flag))
+    img = be.render_pass(0, 3, 1, 7, 5)[0].copy()
+    q = be.wavefront.queue_lengths()
+    sort[str(flag)] = dict(img=img.tolist(), hits=q[1], hits_b=q[3])
+cg = CPUBackend(gs).render_pass(0, 3, 1, 7, 5)[0]
+out["sort"] = dict(equal=sort["True"]["img"] == sort["False"]["img"],
+                   maxdiff=float(np.abs(np.array(sort["True"]["img"]) - cg).max()),
+                   sorted_hits=[sort["True"]["hits"], sort["True"]["hits_b"]],
+                   unsorted_hits=[sort["False"]["hits"], sort["False"]["hits_b"]])
 # Furnace on the simulator: L = Le * sum_{k<=3} a^k.
 f = load_scene(write_scene(tempfile.mkdtemp(), furnace_scene(0.5, 0.5, 3, res=(4, 4))))
 img, st = CUDABackend(f).render_pass(0, 24, 0, 3, 5)
@@ -97,3 +113,8 @@ def test_cuda_kernel_on_simulator():
     for name, got in out["halves"].items():
         assert got["sum"] > 0 and got["differ"], (name, got)
         assert got["equal"] and got["totals_equal"], (name, got)
+    sort = out["sort"]
+    # both queues were used at the first vertex, and they hold what one queue held
+    assert min(sort["sorted_hits"]) > 0 and sort["unsorted_hits"][1] == 0, sort
+    assert sum(sort["sorted_hits"]) == sort["unsorted_hits"][0], sort
+    assert sort["equal"] and sort["maxdiff"] < 1e-3, sort

@@ -25,6 +25,13 @@ Shadow rays traced in launches of their own took the gain back, and the first ve
 in the camera rays' launch lost 2-4 %. H100, 2026-11-24; docs/benchmarks.md, "The
 wavefront kernels".
 
+The hit queue is kept in two parts, the hits on principled materials at its far end (filled
+downwards) and the others (diffuse) from its start, so that the shading kernel's warps
+mostly shade one kind of material instead of waiting, lane by lane, for both kinds' code:
+H200, 2026-11-26 (bench.gpu_launch, against one unsorted queue): the textured scene
++26-37 %, bunny-studio +4-8 %, the sun +3-6 % (docs/benchmarks.md). The order in which the
+paths are shaded changes nothing in their numbers.
+
 Queues are appended with one atomic add per warp (a ballot of the lanes that append); a
 launch loops over its queue with a fixed grid, reading the queue's length on the GPU, so
 the host never waits between launches. Only scenes with an HDRI render this way, and only
@@ -39,7 +46,8 @@ from .._cache import jit_cache
 from ..memory import device_free_bytes
 from ..kernels.constants import STACK_SIZE
 from ..kernels.integrator import make_wavefront
-from ..kernels.layout import HIT_F_WIDTH, PATH_F_WIDTH, PATH_I_WIDTH
+from ..kernels.layout import (HIT_F_WIDTH, M_TYPE, MAT_PRINCIPLED, PATH_F_WIDTH,
+                              PATH_I_WIDTH)
 
 # Paths a launch holds state for: 2^23 paths are ~0.8 GB of path state, hits and queues; a
 # pass with more samples x pixels runs in several launches (sample ranges, added in order).
@@ -62,29 +70,36 @@ CHECK_EVERY = 8
 # cost three launches per vertex. None: every vertex apart.
 WAVE_LEVELS = 3
 FINISH_THREADS = 1 << 20
-# The queue lengths of vertex k: counts[3 k + PATHS] paths to trace, of which
-# counts[3 k + HITS] hit a surface and counts[3 k + MISSES] left the scene.
-PATHS, HITS, MISSES = 0, 1, 2
+# The queue lengths of vertex k: counts[LEVEL k + PATHS] paths to trace, of which
+# counts[LEVEL k + HITS] hit a surface (and, with sort_hits, counts[LEVEL k + HITS_B] more,
+# those on principled materials, kept at the hit queue's far end) and
+# counts[LEVEL k + MISSES] left the scene.
+PATHS, HITS, MISSES, HITS_B = 0, 1, 2, 3
+LEVEL = 4
 
 
 def _make_push():
-    """push(queue, counts, level, path, append): append ``path`` to ``queue`` where
-    ``append``, counting in counts[level]; returns its slot (-1: not appended). Called by
-    every lane of a warp (the launches' loops run the same number of rounds on all lanes):
-    one atomic add per warp, and a warp's paths stay together in the queue."""
+    """push(queue, counts, level, path, append, back): append ``path`` to ``queue`` where
+    ``append``, counting in counts[level]; returns its slot (-1: not appended): the k-th
+    path appended goes to queue[k], or with ``back`` to queue[len - 1 - k] (a second queue
+    growing down from the far end of the same array). Called by every lane of a warp (the
+    launches' loops run the same number of rounds on all lanes): one atomic add per warp,
+    and a warp's paths stay together in the queue."""
     if config.ENABLE_CUDASIM:
         # the simulator runs a thread at a time: a plain atomic add per path
         @cuda.jit(device=True)
-        def push(queue, counts, level, path, append):
+        def push(queue, counts, level, path, append, back):
             if append:
                 slot = cuda.atomic.add(counts, level, 1)
+                if back:
+                    slot = queue.shape[0] - 1 - slot
                 queue[slot] = path
                 return slot
             return -1
         return push
 
     @cuda.jit(device=True)
-    def push(queue, counts, level, path, append):
+    def push(queue, counts, level, path, append, back):
         votes = cuda.ballot_sync(FULL_MASK, append)
         lane = cuda.laneid
         base = 0
@@ -94,6 +109,8 @@ def _make_push():
         if append:
             below = votes & ((np.uint32(1) << np.uint32(lane)) - np.uint32(1))
             slot = base + cuda.popc(below)
+            if back:
+                slot = queue.shape[0] - 1 - slot
             queue[slot] = path
             return slot
         return -1
@@ -101,16 +118,19 @@ def _make_push():
 
 
 @functools.lru_cache(maxsize=None)
-def wavefront_kernels(features, max_registers=None, fast=False):
+def wavefront_kernels(features, max_registers=None, fast=False, sort_hits=False):
     """(start, extend, miss, shade, finish, film, zero) kernels for scenes with ``features``;
-    ``max_registers`` and ``fast`` apply to the shading kernel (see backends.cuda)."""
+    ``max_registers`` and ``fast`` apply to the shading kernel (see backends.cuda);
+    ``sort_hits``: the hits on principled materials queued apart from the others (at the hit
+    queue's far end), so that the shading kernel's warps run one kind of material."""
     from ..kernels.device import FAST_MATH_FLAGS
     W = make_wavefront(features, "cuda")
     wave_start, wave_trace, store_hit, wave_miss, wave_shade, wave_finish, wave_film = W
     push = _make_push()
     fastmath = set(FAST_MATH_FLAGS) if fast else False
     sim = config.ENABLE_CUDASIM
-    options_key = (max_registers or 0) * 2 + bool(fast)
+    SORT = bool(sort_hits)
+    options_key = ((max_registers or 0) * 2 + bool(fast)) * 2 + SORT
     shade_options = {} if sim else dict(max_registers=max_registers, fastmath=fastmath)
     plain_options = {} if sim else dict(fastmath=fastmath)
 
@@ -127,15 +147,15 @@ def wavefront_kernels(features, max_registers=None, fast=False):
                 wave_start(path, sample_start, width, height, seed, scene, paths_f, paths_i)
                 pixel = path % (width * height)
                 append = active[pixel // width, pixel % width] != 0
-            push(queue, counts, PATHS, path, append)
+            push(queue, counts, PATHS, path, append, False)
 
     @cuda.jit(cache=jit_cache(), **plain_options)
     def extend(queue, counts, level, scene, paths_f, paths_i, hits_f, hits_i, hit_queue,
                miss_queue):
-        """The closest hits of the paths in queue ``level`` (counts[PATHS + 3 level] of
+        """The closest hits of the paths in queue ``level`` (counts[PATHS + LEVEL level] of
         them): the paths that hit a surface make the hit queue (their hits in its slots),
         the others the miss queue."""
-        n = counts[PATHS + 3 * level]
+        n = counts[PATHS + LEVEL * level]
         stride = cuda.gridsize(1)
         begin = cuda.grid(1)
         stack = cuda.local.array(STACK_SIZE, np.int32)
@@ -148,15 +168,23 @@ def wavefront_kernels(features, max_registers=None, fast=False):
             if valid:
                 path = queue[slot]
                 t, tri, b1, b2 = wave_trace(path, scene, paths_f, paths_i, stack)
-            hit_slot = push(hit_queue, counts, HITS + 3 * level, path, valid and tri >= 0)
-            push(miss_queue, counts, MISSES + 3 * level, path, valid and tri < 0)
+            b_side = False
+            if SORT and valid and tri >= 0:
+                b_side = scene.mat[scene.tri_mat[tri], M_TYPE] == MAT_PRINCIPLED
+            hit_slot = push(hit_queue, counts, HITS + LEVEL * level, path,
+                            valid and tri >= 0 and not b_side, False)
+            if SORT:
+                slot_b = push(hit_queue, counts, HITS_B + LEVEL * level, path, b_side, True)
+                if slot_b >= 0:
+                    hit_slot = slot_b
+            push(miss_queue, counts, MISSES + LEVEL * level, path, valid and tri < 0, False)
             if hit_slot >= 0:
                 store_hit(hits_f, hits_i, hit_slot, t, tri, b1, b2)
 
     @cuda.jit(cache=jit_cache(), **plain_options)
     def miss(miss_queue, counts, level, scene, paths_f, paths_i):
         """The ends of the paths in miss queue ``level``."""
-        n = counts[MISSES + 3 * level]
+        n = counts[MISSES + LEVEL * level]
         for slot in range(cuda.grid(1), n, cuda.gridsize(1)):
             wave_miss(miss_queue[slot], scene, paths_f, paths_i)
 
@@ -167,7 +195,9 @@ def wavefront_kernels(features, max_registers=None, fast=False):
         make queue ``level`` + 1."""
         if options_key < 0:     # never: makes the options part of the cache key
             return
-        n = counts[HITS + 3 * level]
+        n_a = counts[HITS + LEVEL * level]
+        n = n_a + counts[HITS_B + LEVEL * level]
+        last = hit_queue.shape[0] - 1
         stride = cuda.gridsize(1)
         begin = cuda.grid(1)
         stack = cuda.local.array(STACK_SIZE, np.int32)
@@ -176,11 +206,13 @@ def wavefront_kernels(features, max_registers=None, fast=False):
             path = 0
             alive = False
             if slot < n:
+                if slot >= n_a:         # (sort_hits: the far end's queue)
+                    slot = last - (slot - n_a)
                 path = hit_queue[slot]
                 alive = wave_shade(path, slot, sample_start, width, height, seed,
                                    max_bounces, rr_depth, scene, paths_f, paths_i, hits_f,
                                    hits_i, stack)
-            push(next_queue, counts, PATHS + 3 * (level + 1), path, alive)
+            push(next_queue, counts, PATHS + LEVEL * (level + 1), path, alive, False)
 
     @cuda.jit(cache=jit_cache(), **shade_options)
     def finish(queue, counts, level, sample_start, width, height, seed, max_bounces,
@@ -188,7 +220,7 @@ def wavefront_kernels(features, max_registers=None, fast=False):
         """The paths of queue ``level`` to their ends."""
         if options_key < 0:
             return
-        n = counts[PATHS + 3 * level]
+        n = counts[PATHS + LEVEL * level]
         stack = cuda.local.array(STACK_SIZE, np.int32)
         for slot in range(cuda.grid(1), n, cuda.gridsize(1)):
             wave_finish(queue[slot], sample_start, width, height, seed, max_bounces,
@@ -228,8 +260,8 @@ class WavefrontLaunch:
 
     def __init__(self, features, width, height, max_registers, fast, block,
                  wave_threads=WAVE_THREADS, max_paths=MAX_PATHS, wave_levels=WAVE_LEVELS,
-                 finish_threads=FINISH_THREADS):
-        self.kernels = wavefront_kernels(features, max_registers, bool(fast))
+                 finish_threads=FINISH_THREADS, sort_hits=True):
+        self.kernels = wavefront_kernels(features, max_registers, bool(fast), bool(sort_hits))
         self.width, self.height = width, height
         self.block = block
         self.wave_threads = wave_threads
@@ -298,7 +330,7 @@ class WavefrontLaunch:
         pixels = w * h
         chunks = max(1, -(-n_samples * pixels // self.max_paths))
         per_chunk = max(1, -(-n_samples // chunks))
-        self._ensure(per_chunk * pixels, 3 * (max_bounces + 2))
+        self._ensure(per_chunk * pixels, LEVEL * (max_bounces + 2))
         # the queues: paths to trace (the next vertex's, written by shade once extend has
         # read them), those that hit a surface, those that left the scene
         paths_f, paths_i, hits_f, hits_i, queue, hit_queue, miss_queue = self._buffers
@@ -329,7 +361,7 @@ class WavefrontLaunch:
                           paths_i, hits_f, hits_i)
                 if self.wave_levels is None and level % CHECK_EVERY == CHECK_EVERY - 1 \
                         and level < max_bounces:
-                    k = PATHS + 3 * (level + 1)
+                    k = PATHS + LEVEL * (level + 1)
                     counts[k:k + 1].copy_to_host(self._count_host)
                     if self._count_host[0] == 0:
                         break
