@@ -257,3 +257,14 @@ def test_recompile_keeps_textures_and_bvh_arrays():
     for name in ("tex_data", "bvh_box", "bvh_child", "tri_v", "tri_n", "env_img", "env_cond"):
         assert getattr(after, name) is getattr(before, name), name
     assert after.cam is not before.cam
+
+
+def test_wavefront_threshold_follows_the_scene_features():
+    """Scenes with mip-mapped textures hand passes to the wavefront kernels from a lower
+    size (backends.cuda.wave_min_paths_for); importing the CUDA backend needs no GPU."""
+    from pathtracer.backends.cuda import (WAVE_MIN_PATHS, WAVE_MIN_PATHS_MIPMAPS,
+                                          wave_min_paths_for)
+    plain = pt.load_scene(room()).compiled.features
+    assert wave_min_paths_for(plain) == WAVE_MIN_PATHS
+    textured = pt.load_scene(os.path.join(ROOT, "scenes", "textured.json")).compiled.features
+    assert wave_min_paths_for(textured) == WAVE_MIN_PATHS_MIPMAPS < WAVE_MIN_PATHS

@@ -73,6 +73,18 @@ def max_registers_for(features):
 # pass is not hidden behind a small pass's GPU time, such as the first passes of a
 # progressive render (256x192 x 1 spp: 49k paths). Both kernels are compiled.
 WAVE_MIN_PATHS = 1 << 21
+# ... and from this many in scenes with mip-mapped textures, whose megakernel diverges most
+# (anisotropic probes at the first hits): the textured scene at 256x192 on an H200
+# (2026-11-26, an ad-hoc probe of both kernels): the wavefront 0.82x the megakernel's
+# paths/s at 0.2M paths, 1.29x at 0.39M, 1.89x at 0.79M; bunny-studio and the sun cross
+# over at 1.5-2M paths (docs/benchmarks.md).
+WAVE_MIN_PATHS_MIPMAPS = 1 << 19
+
+
+def wave_min_paths_for(features):
+    """The smallest pass (in paths) that the wavefront kernels render where they are the
+    default (wavefront_for)."""
+    return WAVE_MIN_PATHS_MIPMAPS if specialise(features).mipmaps else WAVE_MIN_PATHS
 
 
 def wavefront_for(features):
@@ -290,7 +302,7 @@ class CUDABackend:
         if wavefront == AUTO:
             from .wavefront import fits
             wavefront = wavefront_for(scene.features) and fits(scene.width, scene.height)
-            self.wave_min_paths = WAVE_MIN_PATHS
+            self.wave_min_paths = wave_min_paths_for(scene.features)
         if target_threads is None:
             target_threads = TARGET_THREADS_REGENERATING if regenerate else TARGET_THREADS
         self.target_threads = target_threads
