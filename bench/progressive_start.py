@@ -4,9 +4,9 @@
     python -m bench.progressive_start cornell-box bunny-studio sun [--backend cuda]
         [--renders 15] [--json FILE]
 
-Each render runs passes that double from the API's first pass (``api.first_pass_spp``) to
-256 spp (the sun: 1,024); the error is measured after each pass and its time taken out of
-the clock (as ``bench.run.convergence_ours``), and ``bench.metrics.time_to_threshold`` reads
+Each render is ``bench.run.progressive_curve`` (passes doubling from the API's first pass,
+``api.first_pass_spp``) to 256 spp (the sun: 1,024), the error measured after each pass and
+its time taken out of the clock, and ``bench.metrics.time_to_threshold`` reads
 the time to each threshold. Seeds 0 .. renders - 1, after a warm-up render. To compare with
 another tree, put its folder first on PYTHONPATH (the script prints which ``pathtracer`` it
 measured).
@@ -14,7 +14,6 @@ measured).
 import argparse
 import json
 import statistics
-import time
 
 THRESHOLDS = (1e-2, 3e-3, 1e-3)
 
@@ -22,7 +21,7 @@ THRESHOLDS = (1e-2, 3e-3, 1e-3)
 def measure(name, backend, renders):
     import pathtracer as pt
     from bench.metrics import time_to_threshold
-    from bench.run import load_reference, relmse
+    from bench.run import load_reference, progressive_curve
     from bench.scenes import convergence_scene
     ref, _ = load_reference(name)
     scene = convergence_scene(name)
@@ -31,15 +30,7 @@ def measure(name, backend, renders):
     times = {th: [] for th in THRESHOLDS}
     first = None
     for seed in range(renders):
-        points = []
-        measuring = [0.0]
-
-        def on_pass(p):
-            t0 = time.perf_counter()
-            points.append((p.elapsed - measuring[0], p.spp, relmse(p.image(), ref)))
-            measuring[0] += time.perf_counter() - t0
-        pt.render(scene, spp=spp, backend=backend, callback=on_pass,
-                  pass_seconds=float("inf"), seed=seed)
+        points = progressive_curve(scene, ref, backend, spp, seed=seed)
         first = points[0][1]
         for th in THRESHOLDS:
             times[th].append(time_to_threshold([p[0] for p in points], [p[2] for p in points],

@@ -63,14 +63,13 @@ class Results:
 # ---------------------------------------------------------------------------------------
 # Error against run time
 
-def convergence_ours(backend_name, name, max_spp, adaptive=None):
-    """(seconds, spp, relMSE) after each progressive pass, in rendering time (compile and
-    the error measurement excluded); ``adaptive``:
-    adaptive sampling to that per-pixel relMSE (render's ``adaptive``). Rendered through
-    the Python API, as the CLI renders."""
+def progressive_curve(scene, ref, backend_name, max_spp, adaptive=None, seed=None):
+    """(seconds, spp, relMSE against ``ref``) after each pass of one progressive render of
+    ``scene`` (a Python-API Scene) through the Python API, as the CLI renders: passes
+    doubling from the API's first pass (1 spp on the CPU; on the GPU the spp of
+    api.PREVIEW_FIRST_PASS_PATHS paths, 8 at the convergence sizes), in rendering time
+    (compile and the error measurement excluded)."""
     import pathtracer as pt
-    ref, _ = load_reference(name)
-    scene = convergence_scene(name)
     points = []
     measuring = [0.0]   # seconds spent in on_pass so far
 
@@ -82,11 +81,16 @@ def convergence_ours(backend_name, name, max_spp, adaptive=None):
         points.append((p.elapsed - measuring[0], p.spp, relmse(p.image(), ref)))
         measuring[0] += time.perf_counter() - t0
 
-    # passes doubling from the API's first pass (1 spp on the CPU; on the GPU the spp of
-    # api.PREVIEW_FIRST_PASS_PATHS paths, 8 at these sizes): the error is measured after each
     pt.render(scene, spp=max_spp, backend=backend_name, callback=on_pass,
-              pass_seconds=float("inf"), adaptive=adaptive)
+              pass_seconds=float("inf"), adaptive=adaptive, seed=seed)
     return points
+
+
+def convergence_ours(backend_name, name, max_spp, adaptive=None):
+    """progressive_curve of convergence scene ``name`` against its reference; ``adaptive``:
+    adaptive sampling to that per-pixel relMSE (render's ``adaptive``)."""
+    ref, _ = load_reference(name)
+    return progressive_curve(convergence_scene(name), ref, backend_name, max_spp, adaptive)
 
 
 def convergence_ours_levels(backend_name, name, max_spp):
