@@ -162,6 +162,65 @@ def test_wavefront_equals_megakernel(tmp_path):
 
 
 @gpu
+def test_launcher_launches_as_the_dispatcher():
+    """backends.launch.Launcher: the kept packing is used for device arrays passed again,
+    a new device array of the same type is packed anew, scalars change per launch, and
+    another type or a host array goes through the dispatcher (a host array is copied back,
+    as Numba does) without upsetting the launches after it."""
+    from numba import cuda
+
+    from pathtracer.backends.launch import Launcher
+
+    @cuda.jit
+    def axpy(out, x, a, add):
+        i = cuda.grid(1)
+        if i < out.shape[0]:
+            out[i] = out[i] + a * x[i] if add else a * x[i]
+
+    launch = Launcher(axpy)
+    x = np.arange(100, dtype=np.float32)
+    d_x, d_out = cuda.to_device(x), cuda.to_device(np.zeros(100, np.float32))
+    launch(1, 128, d_out, d_x, np.float32(2.0), False)      # compiles, binds
+    assert launch._kernel is not None
+    launch(1, 128, d_out, d_x, np.float32(3.0), True)       # the kept packing
+    assert np.array_equal(d_out.copy_to_host(), 5 * x)
+    d_x2 = cuda.to_device(x + 1)                            # a new array: packed anew
+    launch(1, 128, d_out, d_x2, np.float32(1.0), True)
+    assert np.array_equal(d_out.copy_to_host(), 5 * x + x + 1)
+    host = np.zeros(100, np.float32)                        # a host array: the dispatcher
+    launch(1, 128, host, d_x, np.float32(2.0), False)
+    assert np.array_equal(host, 2 * x)
+    d64 = cuda.to_device(np.zeros(100, np.float64))         # another type: the dispatcher
+    launch(1, 128, d64, cuda.to_device(x.astype(np.float64)), 0.5, False)
+    assert np.array_equal(d64.copy_to_host(), 0.5 * x)
+    launch(1, 128, d_out, d_x, np.float32(4.0), False)      # and back
+    cuda.synchronize()
+    assert np.array_equal(d_out.copy_to_host(), 4 * x)
+
+
+@gpu
+def test_kept_launches_render_as_the_dispatcher(tmp_path, monkeypatch):
+    """Passes launched with the kept packing (the default) and through Numba's dispatcher
+    (PT_RENDER_PLAIN_LAUNCH=1) give the same image and ray counts bit for bit, on the
+    megakernel (sample groups summed) and the wavefront, over several passes."""
+    from pathtracer.backends.cuda import CUDABackend
+    s = _full_feature_scene(tmp_path)
+    results = {}
+    for plain in ("1", "0"):
+        monkeypatch.setenv("PT_RENDER_PLAIN_LAUNCH", plain)
+        for wavefront in (False, True):
+            be = CUDABackend(s, wavefront=wavefront)
+            for start, n in ((0, 1), (1, 2), (3, 16)):
+                results[plain, wavefront, start] = [
+                    x.copy() for x in be.render_pass(start, n, 1, 6, 2)]
+            assert (be._launch_pass._kernel is not None) == (plain == "0" and not wavefront)
+    for (plain, wavefront, start), (a, sa) in results.items():
+        if plain == "0":
+            b, sb = results["1", wavefront, start]
+            assert (a == b).all() and (sa == sb).all(), (wavefront, start)
+
+
+@gpu
 def test_adaptive_halves_in_one_launch(tmp_path):
     """render_halves (an adaptive pass's two halves from one launch) gives the numbers of
     two render_pass_totals launches bit for bit, on the megakernel and on the wavefront

@@ -29,6 +29,7 @@ if "NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS" not in os.environ:
         _c.CUDA_LOW_OCCUPANCY_WARNINGS = 0
 
 from .._cache import jit_cache
+from .launch import Launcher
 
 from ..kernels.constants import STACK_SIZE
 from ..kernels.device import FAST_MATH_FLAGS
@@ -69,16 +70,18 @@ def max_registers_for(features):
 
 
 # Where the wavefront kernels render (wavefront_for), passes of fewer camera paths than this
-# render with the megakernel: the Python and driver time of the wavefront's ~10 launches per
-# pass is not hidden behind a small pass's GPU time, such as the first passes of a
-# progressive render (256x192 x 1 spp: 49k paths). Both kernels are compiled.
-WAVE_MIN_PATHS = 1 << 21
+# render with the megakernel: the host time of the wavefront's ~13 launches per pass is not
+# hidden behind a small pass's GPU time. Both kernels are compiled. Since the launches keep
+# their arguments' packing (backends.launch: ~20 us of host time a launch instead of ~180)
+# the wavefront wins from 0.5-0.8M paths: H200, 2026-11-26 (an ad-hoc probe of both kernels,
+# 256x192), wavefront / megakernel paths/s at 0.39 / 0.79 / 1.57M paths: bunny-studio 0.99 /
+# 1.12 / 1.30, the sun 0.96 / 1.05 / 1.23 (before it the two crossed at 1.5-2M: 2^21).
+WAVE_MIN_PATHS = 1 << 19
 # ... and from this many in scenes with mip-mapped textures, whose megakernel diverges most
-# (anisotropic probes at the first hits): the textured scene at 256x192 on an H200
-# (2026-11-26, an ad-hoc probe of both kernels): the wavefront 0.82x the megakernel's
-# paths/s at 0.2M paths, 1.29x at 0.39M, 1.89x at 0.79M; bunny-studio and the sun cross
-# over at 1.5-2M paths (docs/benchmarks.md).
-WAVE_MIN_PATHS_MIPMAPS = 1 << 19
+# (anisotropic probes at the first hits): the textured scene at 256x192, the same probe:
+# the wavefront 1.42x the megakernel at 0.10M paths, 1.76x at 0.20M, 1.96x at 0.39M
+# (docs/benchmarks.md, "Kernel launches that keep their arguments' packing").
+WAVE_MIN_PATHS_MIPMAPS = 1 << 17
 
 
 def wave_min_paths_for(features):
@@ -315,6 +318,11 @@ class CUDABackend:
             self.wavefront = WavefrontLaunch(scene.features, scene.width, scene.height,
                                              wave_registers, fast, self.block, **wave_options)
         self.kernel = pass_kernel(scene.features, max_registers, bool(fast), bool(regenerate))
+        # the launches of each pass, their arguments' packing kept (backends.launch)
+        self._launch_pass = Launcher(self.kernel)
+        self._launch_sum = Launcher(sum_groups)
+        self._launch_zero = Launcher(zero_int64)
+        self._launch_stats = Launcher(sum_stats)
         self.d_scene = _aligned(SceneArrays(*[cuda.to_device(a) for a in scene.arrays]))
         h, w = scene.height, scene.width
         self.d_out = cuda.device_array((h, w, 3), np.float32)
@@ -394,17 +402,17 @@ class CUDABackend:
                                n_samples if split is None else split, self.target_threads)
         total = groups if split is None else 2 * groups
         parts, part_stats = self._scratch(total, halves=split is not None)
-        self.kernel[self.grid + (total,), self.block](
-            parts, part_stats, sample_start, n_samples, seed, max_bounces, rr_depth,
+        self._launch_pass(
+            self.grid + (total,), self.block, parts, part_stats, sample_start, n_samples, seed, max_bounces, rr_depth,
             self.d_scene, d_active)
         if split is not None:
-            sum_groups[self.grid, self.block](parts[:groups], part_stats[:groups], groups,
-                                              self.d_out, self.d_stats)
-            sum_groups[self.grid, self.block](parts[groups:], part_stats[groups:], groups,
-                                              d_out_b, d_stats_b)
+            self._launch_sum(self.grid, self.block, parts[:groups], part_stats[:groups],
+                             groups, self.d_out, self.d_stats)
+            self._launch_sum(self.grid, self.block, parts[groups:], part_stats[groups:],
+                             groups, d_out_b, d_stats_b)
         elif groups > 1:
-            sum_groups[self.grid, self.block](parts, part_stats, groups, self.d_out,
-                                              self.d_stats)
+            self._launch_sum(self.grid, self.block, parts, part_stats, groups, self.d_out,
+                             self.d_stats)
 
     def render_pass(self, sample_start, n_samples, seed, max_bounces, rr_depth, active=None):
         self.launch(sample_start, n_samples, seed, max_bounces, rr_depth, active)
@@ -424,10 +432,10 @@ class CUDABackend:
         if self._totals is None:
             self._totals = cuda.device_array(3, np.int64)
             self._totals_host = cuda.pinned_array(3, np.int64)
-        zero_int64[1, 32](self._totals)
+        self._launch_zero(1, 32, self._totals)
         # (128 blocks at least: fewer make Numba warn of low occupancy)
-        sum_stats[max(128, (self.scene.height + 31) // 32), 32](
-            self.d_stats if d_stats is None else d_stats, self._totals)
+        self._launch_stats(max(128, (self.scene.height + 31) // 32), 32,
+                           self.d_stats if d_stats is None else d_stats, self._totals)
 
     def render_pass_totals(self, sample_start, n_samples, seed, max_bounces, rr_depth,
                            active=None):

@@ -44,6 +44,7 @@ from numba import config, cuda
 
 from .._cache import jit_cache
 from ..memory import device_free_bytes
+from .launch import Launcher
 from ..kernels.constants import STACK_SIZE
 from ..kernels.integrator import make_wavefront
 from ..kernels.layout import (HIT_F_WIDTH, M_TYPE, MAT_PRINCIPLED, PATH_F_WIDTH,
@@ -262,6 +263,9 @@ class WavefrontLaunch:
                  wave_threads=WAVE_THREADS, max_paths=MAX_PATHS, wave_levels=WAVE_LEVELS,
                  finish_threads=FINISH_THREADS, sort_hits=True):
         self.kernels = wavefront_kernels(features, max_registers, bool(fast), bool(sort_hits))
+        # their launches, with the arguments' packing kept between them (backends.launch:
+        # ~180 us of host time per launch through the dispatcher, ~20 us so)
+        self._launchers = tuple(Launcher(k) for k in self.kernels)
         self.width, self.height = width, height
         self.block = block
         self.wave_threads = wave_threads
@@ -280,11 +284,11 @@ class WavefrontLaunch:
 
     def _run(self, name, level, kernel, config_, *args):
         if self.events is None:
-            kernel[config_](*args)
+            kernel(*config_, *args)
             return
         begin, end = cuda.event(), cuda.event()
         begin.record()
-        kernel[config_](*args)
+        kernel(*config_, *args)
         end.record()
         self.events.append((name, level, begin, end))
 
@@ -325,7 +329,7 @@ class WavefrontLaunch:
         the samples from the pass's split-th on go to d_out_b / d_stats_b instead (the two
         halves of an adaptive pass in one launch; each film adds its paths in sample order,
         as a launch of its own would)."""
-        start, extend, miss, shade, finish, film, zero = self.kernels
+        start, extend, miss, shade, finish, film, zero = self._launchers
         w, h = self.width, self.height
         pixels = w * h
         chunks = max(1, -(-n_samples * pixels // self.max_paths))
@@ -338,7 +342,7 @@ class WavefrontLaunch:
         film_grid = ((w + self.block[0] - 1) // self.block[0],
                      (h + self.block[1] - 1) // self.block[1])
         if n_samples <= 0:      # an empty pass: zeros, as the megakernel leaves
-            film[film_grid, self.block](0, 0, paths_f, paths_i, d_out, d_stats, True)
+            film(film_grid, self.block, 0, 0, paths_f, paths_i, d_out, d_stats, True)
             return
         # vertices [0, levels) in launches of their own, then one launch to the ends
         levels = max_bounces + 1 if self.wave_levels is None else \
@@ -347,7 +351,7 @@ class WavefrontLaunch:
             ns = min(per_chunk, n_samples - c0)
             n_paths = ns * pixels
             s0 = sample_start + c0
-            zero[(counts.shape[0] + BLOCK - 1) // BLOCK, BLOCK](counts)
+            zero((counts.shape[0] + BLOCK - 1) // BLOCK, BLOCK, counts)
             grid = self._grid(n_paths)
             self._run("start", None, start, (grid, BLOCK), n_paths, s0, w, h, seed, d_scene,
                       paths_f, paths_i, d_active, queue, counts)
