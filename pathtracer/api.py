@@ -557,7 +557,12 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
     if pass_seconds is None:
         pass_seconds = getattr(be, "pass_seconds", 0.25 if be.name == "cuda" else 0.5)
     headless = callback is None and time is None and spp is not None
-    if headless:
+    if adaptive:
+        # the first pass that fills one device, seen or not: an adaptive render's pass
+        # sizes decide which samples make its two halves, and a split render's must be
+        # one device's (the first ADAPTIVE_MIN_SPP samples are judged together anyway)
+        most = PREVIEW_FIRST_PASS_PATHS.get(be.name, 0)
+    elif headless:
         # Nobody sees the intermediate images: start with a pass of up to FIRST_PASS_PATHS
         # paths (a power of 2 spp), so a small re-render is one or two launches, not log2(spp).
         most = getattr(be, "first_pass_paths", FIRST_PASS_PATHS.get(be.name, 0))

@@ -105,7 +105,9 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
 
     Pass sizes start at ``first_pass`` spp (1: the image refreshes quickly at first;
     api.render starts a GPU's at a pass that fills it, and a caller that shows no
-    intermediate image larger still, as each pass costs a launch and a copy) and double while a pass is shorter than ``pass_seconds``, so overhead stays
+    intermediate image larger still, as each pass costs a launch and a copy; an adaptive
+    render's at 2 to ADAPTIVE_MIN_SPP) and double while a pass is shorter than
+    ``pass_seconds``, so overhead stays
     small later; ``headless`` (nobody sees the intermediate images): every pass after the
     first is aimed at ``pass_seconds`` from the last pass's speed (adaptive renders: 4x
     growth while 4x stays under it), as every pass costs a synchronisation, a copy and the
@@ -160,7 +162,10 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
     if render_halves is not None:
         backend.prepare_halves()
     result = RenderResult(film, 0.0, compile_seconds)
-    n = 2 if adaptive else max(1, int(first_pass))
+    # an adaptive pass has two halves; its first passes (before ADAPTIVE_MIN_SPP samples,
+    # when no pixel is judged yet) take first_pass too, at most ADAPTIVE_MIN_SPP
+    n = max(2, min(int(first_pass), ADAPTIVE_MIN_SPP)) // 2 * 2 if adaptive else \
+        max(1, int(first_pass))
     active = None
     if adaptive and film.spp >= ADAPTIVE_MIN_SPP:
         # a resumed adaptive render: a pixel that stopped (fewer samples than the film's)

@@ -151,3 +151,13 @@ def test_a_uniform_film_is_not_continued_adaptively():
     # an adaptive film goes on adaptively
     film = render(scene, backend, spp=32, adaptive=1e-3).film
     assert render(scene, backend, spp=64, adaptive=1e-3, film=film).film.spp <= 64
+
+
+def test_adaptive_first_pass_takes_first_pass_in_halves():
+    """An adaptive render's first pass is ``first_pass`` samples (two halves), at least 2
+    and at most ADAPTIVE_MIN_SPP (no pixel is judged before that many)."""
+    scene = _cornell(24)
+    backend = make_backend("cpu", scene)
+    for first, expected in ((1, 2), (2, 2), (8, 8), (64, ADAPTIVE_MIN_SPP)):
+        r = render(scene, backend, spp=64, seed=1, adaptive=1e-3, first_pass=first)
+        assert r.passes[0][1] == expected, first
