@@ -5,8 +5,8 @@
         [--renders 15] [--json FILE]
 
 Each render is ``bench.run.progressive_curve`` (passes doubling from the API's first pass,
-``api.first_pass_spp``) to 256 spp (the sun: 1,024), the error measured after each pass and
-its time taken out of the clock, and ``bench.metrics.time_to_threshold`` reads
+``api.first_pass_spp``) to 256 spp (the sun: 1,024), each pass's image taken in the clock
+and its error measured after the render, and ``bench.metrics.time_to_threshold`` reads
 the time to each threshold. Seeds 0 .. renders - 1, after a warm-up render. To compare with
 another tree, put its folder first on PYTHONPATH (the script prints which ``pathtracer`` it
 measured).

@@ -30,6 +30,9 @@ HEADLESS_GROWTH = 64
 # Adaptive sampling: every pixel takes this many samples before its error is judged
 ADAPTIVE_MIN_SPP = 16
 RELMSE_EPS = 0.01       # the relMSE metric's denominator term (film.relmse)
+# A uniform render's next pass is launched before the last one is added to the film (see
+# render) after passes shorter than this: on_pass may stop the render with it in flight
+PIPELINE_SECONDS = 0.05
 
 
 def stop_threshold(film, target, err):
@@ -173,20 +176,58 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
         err = error_estimate(film)
         active = ((film.count == film.spp) &
                   (err > stop_threshold(film, adaptive, err))).astype(np.uint8)
+    # A uniform render on a backend that can start a pass without waiting for it (CUDA:
+    # ``launch``, then ``collect_pass_totals``) launches the next pass before it adds this
+    # one to the film and calls on_pass, so the GPU renders while the host does that (a
+    # small image's progressive render: ~0.5 ms a pass). Only after short passes
+    # (PIPELINE_SECONDS): a pass launched ahead is lost when on_pass stops the render.
+    launch_pass = getattr(backend, "launch", None)
+    collect = getattr(backend, "collect_pass_totals", None)
+    pipelined = not adaptive and launch_pass is not None and collect is not None
+
+    def finished(done, elapsed):
+        return (spp is not None and done >= spp) or done >= limits.MAX_SPP or \
+            (time_limit is not None and elapsed >= time_limit)
+
+    def clamp(n, done):
+        n = min(n, limits.MAX_PASS_SAMPLES, limits.MAX_SPP - done)
+        return min(n, spp - done) if spp is not None else n
+
+    def next_size(n, dt, elapsed):
+        """The next pass's samples after a pass of n took dt: grow the pass while it is
+        short; aim the last pass at the time limit."""
+        if headless and not adaptive:
+            # nobody waits for an image: aim the next pass at pass_seconds from this
+            # one's speed (at most HEADLESS_GROWTH times larger: a first pass of a few
+            # ms is timed coarsely, and includes the launch and copy)
+            n = max(1, int(min(HEADLESS_GROWTH * n, n * pass_seconds / max(dt, 1e-6))))
+        elif headless and dt < pass_seconds / 4:
+            n *= 4
+        elif dt < pass_seconds:
+            n *= 2
+        elif dt > 2 * pass_seconds and n > 1:
+            n //= 2
+        if time_limit is not None and dt > 0:
+            left = time_limit - elapsed
+            if left > 0:   # (float: a huge time limit must not overflow an int)
+                n = max(1, int(min(float(n), left / (dt / n))))
+        return n
+
+    ahead = None    # (launch time, samples) of the pass launched ahead, pipelined
     start = time.perf_counter()
     try:
         while True:
-            elapsed = time.perf_counter() - start
-            if (spp is not None and film.spp >= spp) or film.spp >= limits.MAX_SPP:
-                break
-            if time_limit is not None and elapsed >= time_limit:
-                break
-            if active is not None and not active.any():
-                break
-            n = min(n, limits.MAX_PASS_SAMPLES, limits.MAX_SPP - film.spp)
-            if spp is not None:
-                n = min(n, spp - film.spp)
-            t_pass = time.perf_counter()
+            if ahead is None:
+                elapsed = time.perf_counter() - start
+                if finished(film.spp, elapsed):
+                    break
+                if active is not None and not active.any():
+                    break
+                n = clamp(n, film.spp)
+                t_pass = time.perf_counter()
+                launched = False
+            else:
+                (t_pass, n), launched, ahead = ahead, True, None
             if adaptive and n >= 2:
                 half = n // 2
                 n = 2 * half
@@ -199,13 +240,27 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
                                     active) for k in range(2))
                 for k, (pass_sum, stats) in enumerate(halves):
                     film.add(pass_sum, stats, half, active, half_b=k == 1)
+                dt = time.perf_counter() - t_pass
             elif active is not None:
                 pass_sum, stats = render_pass(film.spp, n, seed, max_bounces, rr_depth, active)
                 film.add(pass_sum, stats, n, active)
+                dt = time.perf_counter() - t_pass
+            elif pipelined:
+                if not launched:
+                    launch_pass(film.spp, n, seed, max_bounces, rr_depth)
+                pass_sum, stats = collect()
+                dt = time.perf_counter() - t_pass
+                done = film.spp + n
+                elapsed = time.perf_counter() - start
+                if dt < PIPELINE_SECONDS and not finished(done, elapsed):
+                    n_next = clamp(next_size(n, dt, elapsed), done)
+                    launch_pass(done, n_next, seed, max_bounces, rr_depth)
+                    ahead = (time.perf_counter(), n_next)
+                film.add(pass_sum, stats, n)
             else:
                 pass_sum, stats = render_pass(film.spp, n, seed, max_bounces, rr_depth)
                 film.add(pass_sum, stats, n)
-            dt = time.perf_counter() - t_pass
+                dt = time.perf_counter() - t_pass
             elapsed = time.perf_counter() - start
             result.passes.append((elapsed, film.spp))
             if adaptive and film.spp >= ADAPTIVE_MIN_SPP:
@@ -215,22 +270,8 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
             if on_pass is not None and on_pass(film, elapsed) is False:
                 result.stopped = True
                 break
-            # Grow the pass while it is short; aim the last pass at the time limit.
-            if headless and not adaptive:
-                # nobody waits for an image: aim the next pass at pass_seconds from this
-                # one's speed (at most HEADLESS_GROWTH times larger: a first pass of a few
-                # ms is timed coarsely, and includes the launch and copy)
-                n = max(1, int(min(HEADLESS_GROWTH * n, n * pass_seconds / max(dt, 1e-6))))
-            elif headless and dt < pass_seconds / 4:
-                n *= 4
-            elif dt < pass_seconds:
-                n *= 2
-            elif dt > 2 * pass_seconds and n > 1:
-                n //= 2
-            if time_limit is not None and dt > 0:
-                left = time_limit - elapsed
-                if left > 0:   # (float: a huge time limit must not overflow an int)
-                    n = max(1, int(min(float(n), left / (dt / n))))
+            if ahead is None:
+                n = next_size(n, dt, elapsed)
     except KeyboardInterrupt as e:
         result.interrupted = True
         result.signal = e.signum if isinstance(e, Interrupted) else int(signal.SIGINT)

@@ -81,6 +81,37 @@ out["sort"] = dict(equal=sort["True"]["img"] == sort["False"]["img"],
                    maxdiff=float(np.abs(np.array(sort["True"]["img"]) - cg).max()),
                    sorted_hits=[sort["True"]["hits"], sort["True"]["hits_b"]],
                    unsorted_hits=[sort["False"]["hits"], sort["False"]["hits_b"]])
+# The progressive loop with each pass launched before the last one is added to the film
+# (progressive.render on a backend with launch / collect_pass_totals): the film of the
+# same passes one by one; a render that on_pass stops keeps only the passes it saw, and
+# the backend renders right after it
+from pathtracer import progressive
+from pathtracer.film import Film
+progressive.PIPELINE_SECONDS = float("inf")     # (the simulator's passes are slow)
+pipe = {}
+be = CUDABackend(s, wavefront=False)
+ref = Film(5, 6)
+k = 0
+for n in (1, 2, 4):
+    ref.add(*[v.copy() for v in be.render_pass_totals(k, n, 1, 7, 5)], n)
+    k += n
+be.compile()                # (its launch of no samples is not counted below)
+launches = []
+launch = be.launch
+be.launch = lambda *a, **kw: (launches.append(a[:2]), launch(*a, **kw))[1]
+seen = []
+r = progressive.render(s, be, spp=7, seed=1, first_pass=1, pass_seconds=float("inf"),
+                       on_pass=lambda f, e: seen.append((f.spp, len(launches))))
+pipe["equal"] = bool((r.film.sum == ref.sum).all() and (r.film.count == ref.count).all())
+pipe["passes"] = [p[1] for p in r.passes]
+pipe["seen"] = seen
+pipe["launches"] = launches[:]
+stopped = progressive.render(s, be, spp=7, seed=1, first_pass=1, pass_seconds=float("inf"),
+                             on_pass=lambda f, e: False)
+pipe["stopped_spp"] = stopped.film.spp
+again = progressive.render(s, be, spp=7, seed=1, first_pass=1, pass_seconds=float("inf"))
+pipe["again_equal"] = bool((again.film.sum == ref.sum).all())
+out["pipelined"] = pipe
 # Furnace on the simulator: L = Le * sum_{k<=3} a^k.
 f = load_scene(write_scene(tempfile.mkdtemp(), furnace_scene(0.5, 0.5, 3, res=(4, 4))))
 img, st = CUDABackend(f).render_pass(0, 24, 0, 3, 5)
@@ -118,3 +149,9 @@ def test_cuda_kernel_on_simulator():
     assert min(sort["sorted_hits"]) > 0 and sort["unsorted_hits"][1] == 0, sort
     assert sum(sort["sorted_hits"]) == sort["unsorted_hits"][0], sort
     assert sort["equal"] and sort["maxdiff"] < 1e-3, sort
+    pipe = out["pipelined"]
+    assert pipe["equal"] and pipe["passes"] == [1, 3, 7], pipe
+    # each pass but the last was followed by the next one's launch before on_pass saw it
+    assert pipe["seen"] == [[1, 2], [3, 3], [7, 3]], pipe
+    assert pipe["launches"] == [[0, 1], [1, 2], [3, 4]], pipe
+    assert pipe["stopped_spp"] == 1 and pipe["again_equal"], pipe

@@ -328,6 +328,7 @@ class CUDABackend:
         self.d_out = cuda.device_array((h, w, 3), np.float32)
         self.d_stats = cuda.device_array((h, w, 3), np.int32)
         self._parts = None   # scratch film (float sums, ray counts), see _scratch
+        self._views = {}     # its views by (groups, halves), see _scratch
         self._totals = None  # a work item's ray counts (render_rows)
         self._copies = None  # the stream of render_rows_async's copies
         self._halves = None  # the second half's film of render_halves (device, host)
@@ -369,14 +370,24 @@ class CUDABackend:
         """The scratch film for ``groups`` sample groups: a view of one allocation that
         only grows (progressive passes double their samples until the launch is full);
         ``halves``: never the film itself (render_halves sums two films from it)."""
+        # the same view objects for the same groups, so that the launches find their
+        # packing kept (backends.launch: a new view is typed and flattened again)
+        key = (groups, halves)
+        views = self._views.get(key)
+        if views is not None:
+            return views
         if groups == 1 and not halves:
-            return self.d_out.reshape((1,) + self.d_out.shape), \
-                self.d_stats.reshape((1,) + self.d_stats.shape)
-        if self._parts is None or self._parts[0].shape[0] < groups:
-            h, w = self.scene.height, self.scene.width
-            self._parts = (cuda.device_array((groups, h, w, 3), np.float32),
-                           cuda.device_array((groups, h, w, 3), np.int32))
-        return self._parts[0][:groups], self._parts[1][:groups]
+            views = (self.d_out.reshape((1,) + self.d_out.shape),
+                     self.d_stats.reshape((1,) + self.d_stats.shape))
+        else:
+            if self._parts is None or self._parts[0].shape[0] < groups:
+                h, w = self.scene.height, self.scene.width
+                self._parts = (cuda.device_array((groups, h, w, 3), np.float32),
+                               cuda.device_array((groups, h, w, 3), np.int32))
+                self._views = {k: v for k, v in self._views.items() if k == (1, False)}
+            views = (self._parts[0][:groups], self._parts[1][:groups])
+        self._views[key] = views
+        return views
 
     def _wavefront_renders(self, n_samples, megakernel=False):
         """Whether a launch of n_samples per pixel goes to the wavefront kernels."""
@@ -443,6 +454,13 @@ class CUDABackend:
         What the progressive loop calls (the film only adds the counts up); render_pass
         keeps the per-pixel counts (the parity tests compare them with the CPU's)."""
         self.launch(sample_start, n_samples, seed, max_bounces, rr_depth, active)
+        return self.collect_pass_totals()
+
+    def collect_pass_totals(self):
+        """The sums and ray counts of the pass ``launch`` started last, as
+        render_pass_totals returns them: waits for it. The sums are a pinned buffer that
+        the next collect overwrites; the next pass may be launched before they are read
+        (the progressive loop launches it ahead of adding this one to its film)."""
         self.d_out.copy_to_host(self.out)
         return self.out, self._totals_of_pass().reshape(1, 1, 3)
 
