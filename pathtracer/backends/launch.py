@@ -33,11 +33,6 @@ except Exception:       # pragma: no cover - an older or newer numba-cuda
     _AVAILABLE = False
 
 
-# where _prepare_args would put the copies back to host arrays: stays empty, as only
-# device arrays are flattened here
-_NO_COPIES = []
-
-
 def _fast_launches():
     return _AVAILABLE and not config.ENABLE_CUDASIM and \
         os.environ.get("PT_RENDER_PLAIN_LAUNCH", "") in ("", "0")
@@ -123,13 +118,13 @@ class Launcher:
         if len(args) != len(self._types):
             return None
         kernel, stream = self._kernel, self._stream
-        params = []
+        params, copies = [], []    # copies: what Numba would copy back (none, see below)
         for i, (t, a) in enumerate(zip(self._types, args)):
             scalar = self._scalars[i]
             if scalar is not None:
                 if type(a) is not scalar:
                     return None
-                kernel._prepare_args(t, a, stream, _NO_COPIES, params)
+                kernel._prepare_args(t, a, stream, copies, params)
                 continue
             cached = self._cached[i]
             if cached is not None and cached[0] is a:
@@ -138,9 +133,8 @@ class Launcher:
             if not _on_device(a) or self.dispatcher.typeof_pyval(a) != t:
                 return None
             flat = []
-            kernel._prepare_args(t, a, stream, _NO_COPIES, flat)
-            if _NO_COPIES:      # (device arrays are never copied: not reached)
-                del _NO_COPIES[:]
+            kernel._prepare_args(t, a, stream, copies, flat)
+            if copies:      # (a copy back to a host array: device arrays need none)
                 return None
             self._cached[i] = (a, flat)
             params.extend(flat)
