@@ -413,9 +413,8 @@ class CUDABackend:
                                n_samples if split is None else split, self.target_threads)
         total = groups if split is None else 2 * groups
         parts, part_stats = self._scratch(total, halves=split is not None)
-        self._launch_pass(
-            self.grid + (total,), self.block, parts, part_stats, sample_start, n_samples, seed, max_bounces, rr_depth,
-            self.d_scene, d_active)
+        self._launch_pass(self.grid + (total,), self.block, parts, part_stats, sample_start,
+                          n_samples, seed, max_bounces, rr_depth, self.d_scene, d_active)
         if split is not None:
             self._launch_sum(self.grid, self.block, parts[:groups], part_stats[:groups],
                              groups, self.d_out, self.d_stats)
