@@ -72,7 +72,7 @@ def max_registers_for(features):
 # Where the wavefront kernels render (wavefront_for), passes of fewer camera paths than this
 # render with the megakernel: the host time of the wavefront's ~13 launches per pass is not
 # hidden behind a small pass's GPU time. Both kernels are compiled. Since the launches keep
-# their arguments' packing (backends.launch: ~20 us of host time a launch instead of ~180)
+# their arguments' packing (backends.launch: ~30 us of host time a launch instead of ~180)
 # the wavefront wins from 0.5-0.8M paths: H200, 2026-11-26 (an ad-hoc probe of both kernels,
 # 256x192), wavefront / megakernel paths/s at 0.39 / 0.79 / 1.57M paths: bunny-studio 0.99 /
 # 1.12 / 1.30, the sun 0.96 / 1.05 / 1.23 (before it the two crossed at 1.5-2M: 2^21).

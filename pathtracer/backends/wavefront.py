@@ -264,7 +264,7 @@ class WavefrontLaunch:
                  finish_threads=FINISH_THREADS, sort_hits=True):
         self.kernels = wavefront_kernels(features, max_registers, bool(fast), bool(sort_hits))
         # their launches, with the arguments' packing kept between them (backends.launch:
-        # ~180 us of host time per launch through the dispatcher, ~20 us so)
+        # ~180 us of host time per launch through the dispatcher, ~30 us so)
         self._launchers = tuple(Launcher(k) for k in self.kernels)
         self.width, self.height = width, height
         self.block = block
