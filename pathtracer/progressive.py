@@ -214,6 +214,7 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
         return n
 
     ahead = None    # (launch time, samples) of the pass launched ahead, pipelined
+    callback_s = 0.0    # how long the last on_pass took
     start = time.perf_counter()
     try:
         while True:
@@ -248,8 +249,14 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
             elif pipelined:
                 if not launched:
                     launch_pass(film.spp, n, seed, max_bounces, rr_depth)
+                t_wait = time.perf_counter()
                 pass_sum, stats = collect()
-                dt = time.perf_counter() - t_pass
+                now = time.perf_counter()
+                # a pass launched ahead ran on the GPU through the last pass's on_pass (which
+                # may save files): that time is not the pass's own, as it was not before
+                # pipelining, but its wait here is
+                dt = max(now - t_pass - callback_s, now - t_wait) if launched else \
+                    now - t_pass
                 done = film.spp + n
                 elapsed = time.perf_counter() - start
                 if dt < PIPELINE_SECONDS and not finished(done, elapsed):
@@ -267,9 +274,11 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
                 err = error_estimate(film)
                 going = err > stop_threshold(film, adaptive, err)
                 active = (going if active is None else going & (active != 0)).astype(np.uint8)
+            t_callback = time.perf_counter()
             if on_pass is not None and on_pass(film, elapsed) is False:
                 result.stopped = True
                 break
+            callback_s = time.perf_counter() - t_callback
             if ahead is None:
                 n = next_size(n, dt, elapsed)
     except KeyboardInterrupt as e:

@@ -214,6 +214,8 @@ def test_kept_launches_render_as_the_dispatcher(tmp_path, monkeypatch):
                 results[plain, wavefront, start] = [
                     x.copy() for x in be.render_pass(start, n, 1, 6, 2)]
             assert (be._launch_pass._kernel is not None) == (plain == "0" and not wavefront)
+            if wavefront:       # (the extend kernel's launcher bound: the kept packing used)
+                assert (be.wavefront._launchers[1]._kernel is not None) == (plain == "0")
     for (plain, wavefront, start), (a, sa) in results.items():
         if plain == "0":
             b, sb = results["1", wavefront, start]

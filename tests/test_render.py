@@ -341,3 +341,51 @@ def test_headless_passes_aim_at_pass_seconds(monkeypatch):
     render(scene, b2, spp=3000, pass_seconds=pass_seconds, first_pass=1, headless=True)
     assert all(b < a * progressive.HEADLESS_GROWTH + 1 for a, b in zip(b2.sizes, b2.sizes[1:]))
     assert b2.sizes[:3] == [1, 64, 2935]
+
+
+def test_passes_launched_ahead_grow_as_passes_waited_for(monkeypatch):
+    """On a backend that can start a pass without waiting (launch, collect_pass_totals) the
+    next pass is launched before the last one's on_pass; the time on_pass takes (a save,
+    a preview) is not the launched pass's own: passes still double while short (a fake
+    backend whose 'GPU' renders while the host runs on_pass, on a fake clock)."""
+    from pathtracer import progressive
+    clock = [0.0]
+    monkeypatch.setattr(progressive.time, "perf_counter", lambda: clock[0])
+    scene = load_scene(CORNELL)
+    h, w = scene.height, scene.width
+
+    class Fake:
+        name = "fake"
+
+        def __init__(self):
+            self.scene = scene
+            self.sizes, self.pending = [], []
+
+        def update(self, s):
+            self.scene = s
+
+        def compile(self):
+            pass
+
+        def launch(self, sample_start, n, seed, max_bounces, rr_depth, active=None):
+            assert sample_start == sum(self.sizes) and active is None
+            self.sizes.append(n)
+            start = max([clock[0]] + [done for done, _ in self.pending])
+            self.pending.append((start + n * 1e-5, n))      # when the 'GPU' is done
+
+        def render_pass(self, *args):
+            raise AssertionError("a uniform render launches and collects its passes")
+
+        def collect_pass_totals(self):
+            done, n = self.pending.pop(0)
+            clock[0] = max(clock[0], done) + 1e-4          # the wait and the copy
+            return np.full((h, w, 3), float(n)), np.zeros((1, 1, 3), np.int64)
+
+    def on_pass(film, elapsed):
+        clock[0] += 0.3         # longer than pass_seconds
+
+    b = Fake()
+    r = render(scene, b, spp=63, pass_seconds=0.25, first_pass=1, on_pass=on_pass)
+    assert b.sizes == [1, 2, 4, 8, 16, 32] and r.film.spp == 63
+    assert [p[1] for p in r.passes] == [1, 3, 7, 15, 31, 63]
+    assert np.allclose(r.film.image(), 1.0)     # each pass's sums added once, in order
