@@ -111,6 +111,14 @@ class Launcher:
         self._scalars = scalars
         self._cached = [None] * len(args)
         self._kernel = kernel
+        try:    # the internals a launch uses, tried once here: a numba-cuda whose
+            #     internals differ gets the dispatcher, not a traceback at the next launch
+            LaunchConfig(grid=(1, 1, 1), block=(1, 1, 1), shmem_size=0)
+            kernel._codelibrary.get_cufunc().kernel
+            if self._pack(args) is None:
+                self._kernel = None
+        except Exception:       # pragma: no cover
+            self._kernel = None
 
     def _pack(self, args):
         """The kernel's parameters for ``args``, or None where the dispatcher must launch
