@@ -2,7 +2,7 @@
 (a callback sees every pass), the median over many renders: what the first passes cost.
 
     python -m bench.progressive_start cornell-box bunny-studio sun [--backend cuda]
-        [--renders 15] [--json FILE]
+        [--renders 15] [--json FILE] [--passes]
 
 Each render is ``bench.run.progressive_curve`` (passes doubling from the API's first pass,
 ``api.first_pass_spp``) to 256 spp (the sun: 1,024), each pass's image taken in the clock
@@ -29,8 +29,10 @@ def measure(name, backend, renders):
     spp = 1024 if name == "sun" else 256
     times = {th: [] for th in THRESHOLDS}
     first = None
+    curves = []
     for seed in range(renders):
         points = progressive_curve(scene, ref, backend, spp, seed=seed)
+        curves.append(points)
         first = points[0][1]
         for th in THRESHOLDS:
             times[th].append(time_to_threshold([p[0] for p in points], [p[2] for p in points],
@@ -39,6 +41,13 @@ def measure(name, backend, renders):
     for th, v in times.items():
         if None not in v:
             out[f"median_s_to_{th:g}"] = statistics.median(v)
+    # each pass's time and error, medians over the renders (the passes are the same in
+    # every render but the last ones, whose sizes may follow the time taken)
+    passes = min(len(c) for c in curves)
+    out["passes"] = [{"spp": curves[0][k][1],
+                      "median_s": statistics.median(c[k][0] for c in curves),
+                      "median_relmse": statistics.median(c[k][2] for c in curves)}
+                     for k in range(passes) if all(c[k][1] == curves[0][k][1] for c in curves)]
     return out
 
 
@@ -49,6 +58,8 @@ def main(argv=None):
     p.add_argument("--backend", default="cuda", choices=("cpu", "cuda"))
     p.add_argument("--renders", type=int, default=15)
     p.add_argument("--json")
+    p.add_argument("--passes", action="store_true",
+                   help="also print each pass's median time and relMSE (always recorded)")
     args = p.parse_args(argv)
     import pathtracer
     print("pathtracer:", pathtracer.__file__, flush=True)
@@ -60,6 +71,9 @@ def main(argv=None):
         print(f"{name}: first pass {r['first_pass_spp']} spp, " + ", ".join(
             f"to {th:g} {r[f'median_s_to_{th:g}'] * 1e3:.2f} ms" for th in THRESHOLDS
             if f"median_s_to_{th:g}" in r), flush=True)
+        if args.passes:
+            print("  passes: " + ", ".join(f"{p['spp']} spp {p['median_s'] * 1e3:.2f} ms "
+                                           f"{p['median_relmse']:.2e}" for p in r["passes"]))
     if args.json:
         with open(args.json, "w") as f:
             json.dump(record, f, indent=1)
