@@ -2,10 +2,18 @@
 peer renderer of the benchmarks and of the agreement tests.
 
 Only what both renderers express the same way is translated: a pinhole camera with lookAt,
-OBJ meshes with a transform, diffuse and principled materials without textures, and a
-constant or HDRI environment. Anything else raises NotExpressible, and the benchmark leaves
-Mitsuba out of that scene.
+OBJ and PLY meshes with a transform, diffuse and principled materials, their image textures
+and normal maps, and a constant or HDRI environment. Anything else raises NotExpressible,
+and the benchmark leaves Mitsuba out of that scene.
+
+Textures become Mitsuba's ``bitmap``: sRGB-decoded or ``raw``, with the same wrap mode and
+the scene's tile and offset as its ``to_uv``. Mitsuba has no mip-maps, so a ``trilinear``
+texture (our default) is looked up bilinearly there: the same image where a texture is
+magnified, a sharper (aliased) one where it is minified. A number parameter read from a
+colour image is the image's luminance in both renderers.
 """
+import os
+
 import numpy as np
 
 from .kernels.layout import MATERIAL_PARAMS
@@ -21,25 +29,69 @@ class NotExpressible(ValueError):
 def mitsuba_bsdf(material):
     """Mitsuba BSDF of a material given in the scene format's names (a dict)."""
     if material.get("type") == "diffuse":
-        return {"type": "diffuse", "reflectance": {"type": "rgb", "value": material["albedo"]}}
+        return {"type": "diffuse", "reflectance": _rgb(material["albedo"])}
     if material.get("roughness") == 0.0 and material.get("transmission") == 1.0:
         return {"type": "dielectric", "int_ior": material["eta"], "ext_ior": 1.0}
     out = {"type": "principled"}
     for k, v in material.items():
         if k == "albedo":
-            out["base_color"] = {"type": "rgb", "value": v}
+            out["base_color"] = _rgb(v)
         elif k != "type":
             out[MITSUBA_NAMES[k]] = v
     return out
 
 
-def _material(m):
-    if m.textures or m.normal_map is not None or any(m.emission):
-        raise NotExpressible(f"material {m.name}: textures or emission")
+def _rgb(v):
+    """A colour given as [r, g, b], or a Mitsuba texture dictionary as it is."""
+    return v if isinstance(v, dict) else {"type": "rgb", "value": v}
+
+
+# Mitsuba 3's principled takes textures for these parameters only (eta and specular are
+# plain floats there)
+TEXTURABLE = {"albedo", "roughness", "metallic", "specularTint", "anisotropic", "sheen",
+              "sheenTint", "clearcoat", "clearcoatGloss", "subsurface", "transmission"}
+
+
+def mitsuba_texture(spec, what, flip_v=True):
+    """Mitsuba's ``bitmap`` of a TextureSpec. ``flip_v``: the mesh loader turns v into
+    1 - v (Mitsuba's OBJ loader does, as its bitmaps count rows from the top; the scene
+    format's v = 0 is the bottom row), so that the lookup at our (u, v), tiled as
+    (u tile + offset), is Mitsuba's at to_uv (u, v')."""
+    import mitsuba as mi
+    if not os.path.isfile(spec.path) or spec.channel is not None:
+        raise NotExpressible(f"{what}: a texture that is not an image file, or one channel "
+                             "of an image")
+    if tuple(spec.scale) != (1.0, 1.0, 1.0):
+        raise NotExpressible(f"{what}: a texture with a scale")
+    if spec.wrap[0] != spec.wrap[1]:
+        raise NotExpressible(f"{what}: different wrap modes along u and v")
+    (tu, tv), (ou, ov) = spec.tile, spec.offset
+    # our texel row from the bottom is v tile + offset; Mitsuba's row from the top is
+    # to_uv's v: with v' = 1 - v that is tv v' + (1 - ov - tv), without the flip -tv v + 1 - ov
+    sv, bv = (tv, 1.0 - ov - tv) if flip_v else (-tv, 1.0 - ov)
+    T = mi.ScalarTransform4f
+    return {"type": "bitmap", "filename": spec.path, "raw": spec.color_space != "sRGB",
+            "filter_type": "nearest" if spec.filter == "nearest" else "bilinear",
+            "wrap_mode": spec.wrap[0],
+            "to_uv": T().translate([float(ou), float(bv), 0.0]) @ T().scale(
+                [float(tu), float(sv), 1.0])}
+
+
+def _material(m, flip_v=True):
+    if any(m.emission) or "emission" in m.textures:
+        raise NotExpressible(f"material {m.name}: emission")
     d = {"type": m.type, "albedo": list(m.albedo)}
     if m.type == "principled":
         d.update(m.numbers)
+    for key, spec in m.textures.items():
+        if key not in TEXTURABLE:
+            raise NotExpressible(f"material {m.name}: a texture for {key}")
+        d[key] = mitsuba_texture(spec, f"material {m.name}, {key}", flip_v)
     bsdf = mitsuba_bsdf(d)
+    if m.normal_map is not None:
+        bsdf = {"type": "normalmap", "bsdf": bsdf,
+                "normalmap": mitsuba_texture(m.normal_map, f"material {m.name}, normal map",
+                                             flip_v)}
     # our surfaces reflect on both sides; Mitsuba's reflect on the front only
     return bsdf if d.get("transmission", 0) > 0 else {"type": "twosided", "bsdf": bsdf}
 
@@ -64,12 +116,23 @@ def mitsuba_dict(desc, spp=1, sampler="independent"):
                     "film": {"type": "hdrfilm", "width": w, "height": h,
                              "rfilter": {"type": "box"}, "pixel_format": "rgb"},
                     "sampler": {"type": sampler, "sample_count": spp}}}
-    for name, m in desc.materials.items():
-        d["mat-" + name] = _material(m)
+    kinds = {}
     for i, o in enumerate(desc.objects):
         if o.file is None or o.material is None:
             raise NotExpressible(f"object {o.name}: inline mesh or OBJ materials")
-        d[f"obj-{i}"] = {"type": "obj", "filename": o.file, "face_normals": not o.smooth,
+        kind = os.path.splitext(o.file)[1].lower().lstrip(".")
+        if kind not in ("obj", "ply"):
+            raise NotExpressible(f"object {o.name}: a {kind or 'file'} mesh")
+        kinds.setdefault(o.material, set()).add(kind)
+    for name, m in desc.materials.items():
+        used = kinds.get(name, {"obj"})
+        if len(used) > 1 and (m.textures or m.normal_map is not None):
+            raise NotExpressible(f"material {name}: textures on both OBJ and PLY meshes")
+        # Mitsuba's OBJ loader flips v, its PLY loader does not
+        d["mat-" + name] = _material(m, flip_v="obj" in used)
+    for i, o in enumerate(desc.objects):
+        kind = os.path.splitext(o.file)[1].lower().lstrip(".")
+        d[f"obj-{i}"] = {"type": kind, "filename": o.file, "face_normals": not o.smooth,
                          "to_world": T(np.asarray(o.matrix, float).tolist()),
                          "bsdf": {"type": "ref", "id": "mat-" + o.material}}
     env = desc.environment
