@@ -66,9 +66,10 @@ def env_cell(w, h, u, v):
     lookup of the radiance (env_eval) and of the density (env_pdf)."""
     # float32 sizes: int * float32 would promote to float64
     ix, iy, fx, fy = bilinear_cell(u * np.float32(w), v * np.float32(h))
-    i0 = ix % w
-    if i0 < 0:
-        i0 += w
+    # u lies in [0, 1], so ix in [-1, w - 1]: a compare, not an integer division (a NaN
+    # direction's index is clamped: no lookup reads outside the map)
+    i0 = ix + w if ix < 0 else ix
+    i0 = min(max(i0, 0), w - 1)
     i1 = i0 + 1
     if i1 >= w:
         i1 = 0

@@ -33,8 +33,16 @@ NO_FOOTPRINT = (ZERO, ZERO, ZERO, ZERO)
 
 @device
 def wrap(i, n):
-    r = i % n
-    return r + n if r < 0 else r
+    """Texel index i wrapped into [0, n) (repeat). Lookups wrap their coordinates into
+    [0, 1] first, so i is at most one period off: a compare, not an integer division (64-bit
+    modulo is a long software routine on the GPU and a slow divide on the CPU). An index
+    further off (only a NaN coordinate's) is clamped, so that no lookup reads outside the
+    image."""
+    if i < 0:
+        i += n
+    elif i >= n:
+        i -= n
+    return min(max(i, 0), n - 1)
 
 
 @device
@@ -110,8 +118,8 @@ def make_tex_lookup(wrap_modes, mipmaps=False):
         else:
             i0 = wrap(ix, w)
             j0 = wrap(iy, h)
-            i1 = wrap(i0 + 1, w)
-            j1 = wrap(j0 + 1, h)
+            i1 = i0 + 1 if i0 + 1 < w else 0
+            j1 = j0 + 1 if j0 + 1 < h else 0
         return bilinear_blend(texel(tex_data, base, w, i0, j0), texel(tex_data, base, w, i1, j0),
                               texel(tex_data, base, w, i0, j1), texel(tex_data, base, w, i1, j1),
                               fx, fy)
