@@ -1,12 +1,14 @@
 """The kernels' float32 floor, atan2 and acos (kernels.fmath), compiled and interpreted,
-against NumPy in float64."""
+against NumPy in float64; fract against Python's float modulo."""
 import math
 
 import numpy as np
 from numba import njit
 
 from pathtracer.kernels.device import FAST_MATH_FLAGS
-from pathtracer.kernels.fmath import acos_f32, atan2_f32, floor_int
+from pathtracer.kernels.fmath import acos_f32, atan2_f32, floor_int, fract
+from pathtracer.kernels.layout import WRAP_MIRROR
+from pathtracer.kernels.textures import wrap_coordinate
 
 
 @njit(fastmath=set(FAST_MATH_FLAGS), cache=True)
@@ -66,3 +68,32 @@ def test_edge_cases():
     assert acos_f32(np.float32(1)) == 0
     assert acos_f32(np.float32(-1)) == np.float32(np.pi)
     assert acos_f32(np.float32(0)) == np.float32(np.pi / 2)
+
+
+@njit(cache=True)
+def _fract_compiled(xs, out, mirror):
+    for i in range(xs.shape[0]):
+        out[i] = fract(xs[i])
+        mirror[i] = wrap_coordinate(xs[i], WRAP_MIRROR)
+
+
+def test_fract_is_python_modulo(rng):
+    """fract(x) (the texture lookups' repeat wrap) and the mirror wrap built on it give
+    Python's float32 x % 1 and x % 2 bit for bit, compiled and interpreted: including
+    negative numbers whose wrapped value rounds up to 1, integers, huge values and inf."""
+    xs = np.concatenate([rng.standard_normal(50_000) * 3, rng.standard_normal(1000) * 1e-9,
+                         rng.uniform(-1e6, 1e6, 1000), np.arange(-5, 6),
+                         [-1e-9, -0.0, 1e30, -1e30, 3.5, -3.5, np.inf, -np.inf]]
+                        ).astype(np.float32)
+    with np.errstate(invalid="ignore"):
+        want = np.array([x % np.float32(1) for x in xs], np.float32)
+        want2 = np.array([x % np.float32(2) for x in xs], np.float32)
+    want_mirror = np.where(want2 > 1, np.float32(2) - want2, want2)
+    out, mirror = np.empty_like(xs), np.empty_like(xs)
+    _fract_compiled(xs, out, mirror)
+    np.testing.assert_array_equal(out, want)
+    np.testing.assert_array_equal(mirror, want_mirror)
+    with np.errstate(invalid="ignore"):
+        interpreted = np.array([fract(x) for x in xs], np.float32)
+    np.testing.assert_array_equal(interpreted, want)
+    assert fract(np.float32(-1e-9)) == np.float32(1.0)   # rounds up: still in [0, 1]

@@ -58,6 +58,37 @@ def _floor_int_ir(typingctx, x):
 overload(floor_int, strict=False)(lambda x: (lambda x: _floor_int_ir(x)))
 
 
+def floor_f32(x):
+    """math.floor(x) of a float32 x as a float32 (any x: no integer in between)."""
+    return type(x)(math.floor(x)) if math.isfinite(x) else x
+
+
+@intrinsic
+def _floor_f32_ir(typingctx, x):
+    if not isinstance(x, types.Float):
+        return None
+    sig = x(x)
+
+    def codegen(context, builder, signature, args):
+        (v,) = args
+        fn = builder.module.declare_intrinsic("llvm.floor", [v.type])
+        return builder.call(fn, [v])
+    return sig, codegen
+
+
+overload(floor_f32, strict=False)(lambda x: (lambda x: _floor_f32_ir(x)))
+
+
+@device
+def fract(x):
+    """x % 1 of a float32 x, in [0, 1] (1 only by rounding: x = -1e-9 gives 1 - 1e-9, which
+    rounds to 1), bit for bit as Python's float modulo: x - floor(x) is the same real number
+    rounded once. Numba compiles ``%`` of floats to fmod and a sign fix-up, which the GPU
+    runs as a routine of dozens of instructions; this is one rounding instruction and a
+    subtraction."""
+    return x - floor_f32(x)
+
+
 @device
 def atan_unit(a):
     """atan(a) for 0 <= a <= 1 (Cephes atanf: one reduction at tan(pi/8), then an odd

@@ -13,9 +13,9 @@ import math
 
 import numpy as np
 
-from .constants import HALF, ONE, ZERO
+from .constants import HALF, ONE, TWO, ZERO
 from .device import device
-from .fmath import floor_int
+from .fmath import floor_int, fract
 from .layout import (FILTER_NEAREST, FILTER_TRILINEAR, TEX_FILTER, TEX_FIRST, TEX_HEIGHT,
                      TEX_LEVELS, TEX_OFFSET, TEX_SCALE, TEX_TILE, TEX_WIDTH, TEX_WRAP, TRI_UV0,
                      TRI_UV1, TRI_UV2, WRAP_MIRROR, WRAP_REPEAT)
@@ -49,10 +49,10 @@ def wrap(i, n):
 def wrap_coordinate(x, mode):
     """A texture coordinate into [0, 1]: repeated, mirrored (period 2) or clamped."""
     if mode == WRAP_REPEAT:
-        return x % ONE
+        return fract(x)
     if mode == WRAP_MIRROR:
-        x = x % np.float32(2.0)
-        return np.float32(2.0) - x if x > ONE else x
+        x = TWO * fract(x * HALF)            # x % 2 (halving and doubling are exact)
+        return TWO - x if x > ONE else x
     return min(max(x, np.float32(0.0)), ONE)
 
 
@@ -151,7 +151,7 @@ def make_tex_lookup(wrap_modes, mipmaps=False):
         # (a huge tile or uv would overflow int(floor(x)) and wreck the bilinear fractions).
         if WRAP_MODES:
             return wrap_coordinate(su, mode_u), wrap_coordinate(sv, mode_v)
-        return su % ONE, sv % ONE
+        return fract(su), fract(sv)
 
     @device
     def anisotropic(tex_data, base, w, h, levels, su, sv, au, av, major, minor, mode_u,
