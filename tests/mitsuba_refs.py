@@ -147,6 +147,13 @@ def render_mitsuba(material, hdri_path, spp, variant="llvm_ad_rgb", obj=SPHERE, 
         "sphere": {"type": "obj", "filename": obj, "face_normals": False,
                    "bsdf": bsdf if bsdf is not None else mitsuba_bsdf(material)},
     })
+    return render_in_passes(scene, spp)
+
+
+def render_in_passes(scene, spp):
+    """Mitsuba's RES x RES image of a loaded scene at ``spp``, rendered in passes of at most
+    1,024 spp (seeds 0, 1, ...); with Mitsuba's version."""
+    import mitsuba as mi
     img = np.zeros((RES, RES, 3))
     passes = max(1, spp // 1024)
     for k in range(passes):

@@ -69,12 +69,9 @@ def render_mitsuba(scene_path, spp, variant="llvm_ad_rgb"):
     from pathtracer.mitsuba import mitsuba_dict
     from pathtracer.scene import load_scene_description
     mi.set_variant(variant)
-    scene = mi.load_dict(mitsuba_dict(load_scene_description(scene_path)))
-    img = np.zeros((RES, RES, 3))
-    passes = max(1, spp // 1024)
-    for k in range(passes):
-        img += np.array(mi.render(scene, spp=spp // passes, seed=k))
-    return (img / passes).astype(np.float32), mi.__version__
+    from tests.mitsuba_refs import render_in_passes
+    return render_in_passes(mi.load_dict(mitsuba_dict(load_scene_description(scene_path))),
+                            spp)
 
 
 def main():
