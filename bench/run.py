@@ -347,11 +347,12 @@ def section_adaptive(scenes, backend_name, max_spp, r, repeats=1):
     return out
 
 
-def section_denoise(scenes, backend_name, low_spp, high_spp, repeats, r):
+def section_denoise(scenes, backend_name, low_spp, high_spp, repeats, r, seeds=1):
     """relMSE of the raw image at low_spp, of it denoised (Open Image Denoise with our
     albedo and normal images; biased) and of the raw image at high_spp, against the scene's
-    reference; the denoiser's and the auxiliary pass's times (median of ``repeats``).
-    {scene: record}."""
+    reference, each the mean over ``seeds`` renders (seeds 0, 1, ...; the albedo and
+    normal images drawn with the same seed) with its standard error; the denoiser's and the
+    auxiliary pass's times (median of ``repeats``). {scene: record}."""
     from pathtracer.backends import make_backend
     from pathtracer.denoise import AOV_SPP, denoise
     from pathtracer.progressive import render
@@ -371,12 +372,19 @@ def section_denoise(scenes, backend_name, low_spp, high_spp, repeats, r):
         aovs = backend.aovs(AOV_SPP, 0)
         denoise(low, aovs)                                   # the denoiser's set-up
         t_dn, _ = median_time(lambda: denoise(low, aovs), repeats)
-        rec = {"low_spp": low_spp, "high_spp": high_spp,
-               "raw_low": relmse(low, ref), "denoised_low": relmse(denoise(low, aovs), ref),
-               "raw_high": relmse(render(scene, backend, spp=high_spp).film.image(), ref),
+        errs = {"raw_low": [], "denoised_low": [], "raw_high": []}
+        for seed in range(seeds):
+            low = render(scene, backend, spp=low_spp, seed=seed).film.image()
+            errs["raw_low"].append(relmse(low, ref))
+            errs["denoised_low"].append(relmse(denoise(low, backend.aovs(AOV_SPP, seed)), ref))
+            errs["raw_high"].append(relmse(render(scene, backend, spp=high_spp,
+                                                  seed=seed).film.image(), ref))
+        rec = {"low_spp": low_spp, "high_spp": high_spp, "seeds": seeds,
                "denoise_s": t_dn, "aov_s": t_aov}
+        for k, v in errs.items():
+            rec[k], rec[k + "_stderr"] = mean_and_error(v)
         out[name] = rec
-        for k in ("raw_low", "denoised_low", "raw_high"):
+        for k in errs:
             r.add("denoise", name, f"pt-render {backend_name}", f"relMSE_{k}", rec[k], "",
                   "spp", low_spp if k != "raw_high" else high_spp)
         r.add("denoise", name, f"pt-render {backend_name}", "denoise_seconds", t_dn, "s",
@@ -679,14 +687,19 @@ def summary(r, res, args):
                          f"{_fmt_time(u[1])} | {_fmt_time(a[1])} | {ratio} |")
     if res["denoise"]:
         lines += ["", "## Denoising (Open Image Denoise, CPU; biased)", "",
-                  "relMSE against each scene's reference; the denoiser is guided by our albedo "
-                  "and normal images (first non-specular hit).", "",
-                  "| scene | raw, low spp | denoised, low spp | raw, high spp | denoise s | "
-                  "albedo+normal pass s |", "|---|---|---|---|---|---|"]
+                  "relMSE against each scene's reference, the mean over the seeds given (+- its "
+                  "standard error); the denoiser is guided by our albedo and normal images "
+                  "(first non-specular hit).", "",
+                  "| scene | seeds | raw, low spp | denoised, low spp | raw, high spp | "
+                  "denoised / raw high | denoise s | albedo+normal pass s |",
+                  "|---|---|---|---|---|---|---|---|"]
         for scene, x in res["denoise"].items():
-            lines.append(f"| {scene} | {x['raw_low']:.3g} ({x['low_spp']} spp) | "
-                         f"{x['denoised_low']:.3g} | {x['raw_high']:.3g} ({x['high_spp']} spp) "
-                         f"| {x['denoise_s']:.3g} | {x['aov_s']:.3g} |")
+            def pm(k):
+                return f"{x[k]:.3g} +- {x[k + '_stderr']:.2g}"
+            lines.append(f"| {scene} | {x['seeds']} | {pm('raw_low')} ({x['low_spp']} spp) | "
+                         f"{pm('denoised_low')} | {pm('raw_high')} ({x['high_spp']} spp) | "
+                         f"{x['denoised_low'] / x['raw_high']:.2f} | "
+                         f"{x['denoise_s']:.3g} | {x['aov_s']:.3g} |")
     thr = res["throughput"]
     if thr:
         lines += ["", "## Throughput (Cornell box)", "",
@@ -805,7 +818,8 @@ def main(argv=None):
                    help="scaling: largest subdivided dragon (3: 6.4M triangles)")
     p.add_argument("--seeds", type=int, default=None,
                    help="samplers: renders per sampler and spp, each with its own seed "
-                        "(default 4; --quick 3; --tiny 1)")
+                        "(default 4; --quick 3; --tiny 1); denoise: renders per image "
+                        "(the same default; 1 with --quick)")
     p.add_argument("--replot", nargs="+", metavar="CSV",
                    help="only draw convergence.png (in --out) from these results.csv files")
     args = p.parse_args(argv)
@@ -859,7 +873,8 @@ def main(argv=None):
     if "denoise" in want:
         res["denoise"] = section_denoise(
             args.scenes[:1] if args.tiny else args.scenes, b, 2 if args.tiny else 16,
-            4 if args.tiny else 256, 1 if args.tiny else 3, r)
+            4 if args.tiny else 256, 1 if args.tiny else 3, r,
+            seeds=1 if args.quick else args.seeds)
     if "throughput" in want:
         res["throughput"] = section_throughput([b], tp[0], tp[1], repeats, r)
     if "filtering" in want:
