@@ -10,15 +10,13 @@ the other references. Mitsuba's side: ``normalmap`` around ``principled``, the m
 bottom of the image in both renderers. The image goes to tests/references/normalmap.npy
 and its settings to normalmap.json.
 """
-import datetime
-import json
 import os
-import platform
 import sys
 
 import numpy as np
 
-from tests.mitsuba_refs import CAMERA, FOV, GRADIENT, MAX_BOUNCES, REF_DIR, RES, gradient_sky
+from tests.mitsuba_refs import (CAMERA, FOV, GRADIENT, MAX_BOUNCES, RES, save_reference,
+                                smooth_sky)
 
 NAME = "normalmap"
 MATERIAL = {"albedo": [0.8, 0.45, 0.2], "roughness": 0.5}
@@ -73,21 +71,14 @@ def main():
     import tempfile
     from tests.test_normal_map import write_sphere_obj
     spp = int(sys.argv[1]) if len(sys.argv) > 1 else 16384
-    if not os.path.isfile(GRADIENT):
-        gradient_sky()
+    smooth_sky()
     with tempfile.TemporaryDirectory() as tmp:
         obj = os.path.join(tmp, "sphere.obj")
         write_sphere_obj(obj, *SPHERE_RES)
         png = bump_normal_map(os.path.join(tmp, "n.png"))
         img, version = render_mitsuba(obj, png, spp)
-    np.save(os.path.join(REF_DIR, NAME + ".npy"), img)
-    meta = {"spp": spp, "mitsuba": version, "date": datetime.date.today().isoformat(),
-            "machine": platform.processor() or platform.machine(),
-            "command": f"python -m tests.mitsuba_normalmap_ref {spp}",
-            "material": MATERIAL, "tile": TILE, "sphere": SPHERE_RES}
-    with open(os.path.join(REF_DIR, NAME + ".json"), "w") as f:
-        json.dump(meta, f, indent=1)
-    print(NAME, img.mean(axis=(0, 1)))
+    save_reference(NAME, img, version, spp, f"python -m tests.mitsuba_normalmap_ref {spp}",
+                   material=MATERIAL, tile=TILE, sphere=SPHERE_RES)
 
 
 if __name__ == "__main__":

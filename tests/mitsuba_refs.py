@@ -60,11 +60,28 @@ def gradient_sky(path=GRADIENT, w=2048, h=1024):
     return path
 
 
+def smooth_sky():
+    """The path of the generated smooth sky, made first if it is missing (not kept in git)."""
+    if not os.path.isfile(GRADIENT):
+        gradient_sky()
+    return GRADIENT
+
+
+def save_reference(name, img, version, spp, command, **settings):
+    """Write a reference image to tests/references/<name>.npy and its settings, with the
+    Mitsuba version, date, machine and command that made it, to <name>.json."""
+    np.save(os.path.join(REF_DIR, name + ".npy"), img)
+    meta = {"spp": spp, "mitsuba": version, "date": datetime.date.today().isoformat(),
+            "machine": platform.processor() or platform.machine(), "command": command,
+            **settings}
+    with open(os.path.join(REF_DIR, name + ".json"), "w") as f:
+        json.dump(meta, f, indent=1)
+    print(name, img.mean(axis=(0, 1)))
+
+
 def env_for(case, shared):
     if case in SMOOTH_SKY_CASES:
-        if not os.path.isfile(GRADIENT):
-            gradient_sky()
-        return GRADIENT
+        return smooth_sky()
     return os.path.join(shared, "assets", "hdri", HDRI)
 
 BASE = [0.8, 0.45, 0.2]

@@ -13,15 +13,14 @@ references. Mitsuba's scene is the translation that the benchmark uses
 the textures' orientation, tiling and wrapping, sRGB decoding and bilinear lookups. The
 image goes to tests/references/textured.npy and its settings to textured.json.
 """
-import datetime
 import json
 import os
-import platform
 import sys
 
 import numpy as np
 
-from tests.mitsuba_refs import CAMERA, FOV, GRADIENT, MAX_BOUNCES, REF_DIR, RES, gradient_sky
+from tests.mitsuba_refs import (CAMERA, FOV, GRADIENT, MAX_BOUNCES, REF_DIR, RES,
+                                render_in_passes, save_reference, smooth_sky)
 
 NAME = "textured"
 ASSETS = os.path.join(os.path.dirname(REF_DIR), "..", "scenes", "assets")
@@ -69,7 +68,6 @@ def render_mitsuba(scene_path, spp, variant="llvm_ad_rgb"):
     from pathtracer.mitsuba import mitsuba_dict
     from pathtracer.scene import load_scene_description
     mi.set_variant(variant)
-    from tests.mitsuba_refs import render_in_passes
     return render_in_passes(mi.load_dict(mitsuba_dict(load_scene_description(scene_path))),
                             spp)
 
@@ -79,8 +77,7 @@ def main():
 
     from tests.test_normal_map import write_sphere_obj
     spp = int(sys.argv[1]) if len(sys.argv) > 1 else 16384
-    if not os.path.isfile(GRADIENT):
-        gradient_sky()
+    smooth_sky()
     with tempfile.TemporaryDirectory() as tmp:
         obj = os.path.join(tmp, "sphere.obj")
         write_sphere_obj(obj, *SPHERE_RES)
@@ -89,16 +86,10 @@ def main():
         with open(path, "w") as f:
             json.dump(our_scene(obj, rough, spp), f)
         img, version = render_mitsuba(path, spp)
-    np.save(os.path.join(REF_DIR, NAME + ".npy"), img)
-    meta = {"spp": spp, "mitsuba": version, "date": datetime.date.today().isoformat(),
-            "machine": platform.processor() or platform.machine(),
-            "command": f"python -m tests.mitsuba_texture_ref {spp}",
-            "material": {k: (dict(v, texture=os.path.basename(v["texture"]))
-                             if isinstance(v, dict) else v) for k, v in MATERIAL.items()},
-            "sphere": SPHERE_RES}
-    with open(os.path.join(REF_DIR, NAME + ".json"), "w") as f:
-        json.dump(meta, f, indent=1)
-    print(NAME, img.mean(axis=(0, 1)))
+    save_reference(NAME, img, version, spp, f"python -m tests.mitsuba_texture_ref {spp}",
+                   material={k: (dict(v, texture=os.path.basename(v["texture"]))
+                                 if isinstance(v, dict) else v) for k, v in MATERIAL.items()},
+                   sphere=SPHERE_RES)
 
 
 if __name__ == "__main__":

@@ -30,19 +30,27 @@ def tone(x):
     return x / (1.0 + x)
 
 
-def _renders(tmp_path, case, backend, spp, sampler):
-    env = env_for(case, SHARED)
+def _render_seeds(tmp_path, backend, spp, scene_of_seed, tag=""):
+    """The K images (float64) of the scene files scene_of_seed(0 .. K - 1) at spp."""
     imgs = []
     for seed in range(K):
-        path = tmp_path / f"s{seed}-{sampler}.json"
-        desc = our_scene(CASES[case], env, spp=spp, seed=seed)
-        desc["render"]["sampler"] = sampler
-        path.write_text(json.dumps(desc))
+        path = tmp_path / f"s{seed}{tag}.json"
+        path.write_text(json.dumps(scene_of_seed(seed)))
         scene = load_scene(str(path))
         result = render(scene, make_backend(backend, scene), spp=spp)
         assert result.film.nonfinite == 0
         imgs.append(result.film.image().astype(np.float64))
     return np.array(imgs)
+
+
+def _renders(tmp_path, case, backend, spp, sampler):
+    env = env_for(case, SHARED)
+
+    def scene_of_seed(seed):
+        desc = our_scene(CASES[case], env, spp=spp, seed=seed)
+        desc["render"]["sampler"] = sampler
+        return desc
+    return _render_seeds(tmp_path, backend, spp, scene_of_seed, "-" + sampler)
 
 
 @needs_shared
@@ -101,24 +109,16 @@ def test_textures_agree_with_mitsuba(tmp_path, backend):
     3's render of the benchmark's translation of the same scene file
     (pathtracer.mitsuba): the textures' orientation, tiling, wrapping, decoding and
     bilinear lookups agree, and so does the translation the benchmark relies on."""
-    from tests.mitsuba_refs import GRADIENT, gradient_sky
+    from tests.mitsuba_refs import smooth_sky
     from tests.mitsuba_texture_ref import NAME, SPHERE_RES, our_scene, roughness_map
     from tests.test_normal_map import write_sphere_obj
-    if not os.path.isfile(GRADIENT):
-        gradient_sky()
+    smooth_sky()
     meta = json.load(open(os.path.join(REF_DIR, NAME + ".json")))
     ref = np.load(os.path.join(REF_DIR, NAME + ".npy")).astype(np.float64)
     obj = str(tmp_path / "sphere.obj")
     write_sphere_obj(obj, *SPHERE_RES)
     rough = roughness_map(str(tmp_path / "roughness.png"))
     spp = 64 if backend == "cpu" else 1024
-    imgs = []
-    for seed in range(K):
-        path = tmp_path / f"s{seed}.json"
-        path.write_text(json.dumps(our_scene(obj, rough, spp=spp, seed=seed)))
-        scene = load_scene(str(path))
-        result = render(scene, make_backend(backend, scene), spp=spp)
-        assert result.film.nonfinite == 0
-        imgs.append(result.film.image().astype(np.float64))
-    _check_agreement("textured sphere vs Mitsuba", np.array(imgs), ref, None,
-                     (K * spp) / meta["spp"])
+    imgs = _render_seeds(tmp_path, backend, spp,
+                         lambda seed: our_scene(obj, rough, spp=spp, seed=seed))
+    _check_agreement("textured sphere vs Mitsuba", imgs, ref, None, (K * spp) / meta["spp"])
