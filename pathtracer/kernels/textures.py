@@ -125,10 +125,12 @@ def make_tex_lookup(wrap_modes, mipmaps=False):
                               fx, fy)
 
     @device
-    def trilinear_at(tex_data, base, w, h, levels, lod, uu, vv, mode_u, mode_v):
-        """Trilinear rgb: the bilinear values of the two mip levels around ``lod``, mixed
-        (Williams 1983, "Pyramidal Parametrics"); level k is max(1, w >> k) x
-        max(1, h >> k) texels and follows level k - 1 in the texel array."""
+    def mip_pair(base, w, h, levels, lod):
+        """The two mip levels around ``lod`` (Williams 1983, "Pyramidal Parametrics"):
+        (base, w, h) of level floor(lod) (at most the last), of the level after it, and the
+        fraction towards that one. Level k is max(1, w >> k) x max(1, h >> k) texels and
+        follows level k - 1 in the texel array. Computed once per lookup, not per probe:
+        the walk down the chain is the same for all of an anisotropic lookup's probes."""
         lod = min(lod, np.float32(levels - 1))
         level = floor_int(lod)
         frac = lod - np.float32(level)
@@ -136,10 +138,16 @@ def make_tex_lookup(wrap_modes, mipmaps=False):
             base += w * h
             w = max(1, w >> 1)
             h = max(1, h >> 1)
+        return base, w, h, base + w * h, max(1, w >> 1), max(1, h >> 1), frac
+
+    @device
+    def trilinear_at(tex_data, mips, uu, vv, mode_u, mode_v):
+        """Trilinear rgb at wrapped coordinates (uu, vv): the bilinear values of the two
+        mip levels ``mips`` (mip_pair), mixed by its fraction."""
+        base, w, h, base1, w1, h1, frac = mips
         r, g, b = bilinear_at(tex_data, base, w, h, uu, vv, mode_u, mode_v)
         if frac > ZERO:
-            r1, g1, b1 = bilinear_at(tex_data, base + w * h, max(1, w >> 1), max(1, h >> 1),
-                                     uu, vv, mode_u, mode_v)
+            r1, g1, b1 = bilinear_at(tex_data, base1, w1, h1, uu, vv, mode_u, mode_v)
             r += (r1 - r) * frac
             g += (g1 - g) * frac
             b += (b1 - b) * frac
@@ -173,10 +181,11 @@ def make_tex_lookup(wrap_modes, mipmaps=False):
         g = ZERO
         b = ZERO
         inv = ONE / np.float32(n)
+        mips = mip_pair(base, w, h, levels, lod)
         for i in range(n):
             x = (np.float32(i) + HALF) * inv - HALF
             uu, vv = wrapped(su + au * x, sv + av * x, mode_u, mode_v)
-            c = trilinear_at(tex_data, base, w, h, levels, lod, uu, vv, mode_u, mode_v)
+            c = trilinear_at(tex_data, mips, uu, vv, mode_u, mode_v)
             r += c[0]
             g += c[1]
             b += c[2]
