@@ -352,9 +352,12 @@ def section_denoise(scenes, backend_name, low_spp, high_spp, repeats, r, seeds=1
     albedo and normal images; biased) and of the raw image at high_spp, against the scene's
     reference, each the mean over ``seeds`` renders (seeds 0, 1, ...; the albedo and
     normal images drawn with the same seed) with its standard error; the denoiser's and the
-    auxiliary pass's times (median of ``repeats``). {scene: record}."""
+    auxiliary pass's times (median of ``repeats``). The denoiser runs where `pt-render
+    --denoise` runs it for this backend (on the GPU for cuda where OIDN's CUDA device
+    works); then its CPU time and the relMSE between the two devices' images are recorded
+    too. {scene: record}."""
     from pathtracer.backends import make_backend
-    from pathtracer.denoise import AOV_SPP, denoise
+    from pathtracer.denoise import AOV_SPP, denoise, resolve_device
     from pathtracer.progressive import render
     from pathtracer.scene import compile_scene
     out = {}
@@ -370,17 +373,26 @@ def section_denoise(scenes, backend_name, low_spp, high_spp, repeats, r, seeds=1
         low = render(scene, backend, spp=low_spp).film.image()
         t_aov, _ = median_time(lambda: backend.aovs(AOV_SPP, 0), repeats)
         aovs = backend.aovs(AOV_SPP, 0)
-        denoise(low, aovs)                                   # the denoiser's set-up
-        t_dn, _ = median_time(lambda: denoise(low, aovs), repeats)
+        device = resolve_device("auto", backend_name)
+        times = {}
+        for d in sorted({device, "cpu"}):
+            denoise(low, aovs, d)                            # the denoiser's set-up
+            times[d], _ = median_time(lambda: denoise(low, aovs, d), repeats)
+        t_dn = times[device]
         errs = {"raw_low": [], "denoised_low": [], "raw_high": []}
         for seed in range(seeds):
             low = render(scene, backend, spp=low_spp, seed=seed).film.image()
             errs["raw_low"].append(relmse(low, ref))
-            errs["denoised_low"].append(relmse(denoise(low, backend.aovs(AOV_SPP, seed)), ref))
+            errs["denoised_low"].append(relmse(denoise(low, backend.aovs(AOV_SPP, seed),
+                                                       device), ref))
             errs["raw_high"].append(relmse(render(scene, backend, spp=high_spp,
                                                   seed=seed).film.image(), ref))
         rec = {"low_spp": low_spp, "high_spp": high_spp, "seeds": seeds,
-               "denoise_s": t_dn, "aov_s": t_aov}
+               "denoise_device": device, "denoise_s": t_dn, "aov_s": t_aov}
+        if device != "cpu":
+            rec["denoise_cpu_s"] = times["cpu"]
+            rec["gpu_vs_cpu_relMSE"] = relmse(denoise(low, aovs, device),
+                                              denoise(low, aovs, "cpu"))
         for k, v in errs.items():
             rec[k], rec[k + "_stderr"] = mean_and_error(v)
         out[name] = rec
@@ -389,6 +401,11 @@ def section_denoise(scenes, backend_name, low_spp, high_spp, repeats, r, seeds=1
                   "spp", low_spp if k != "raw_high" else high_spp)
         r.add("denoise", name, f"pt-render {backend_name}", "denoise_seconds", t_dn, "s",
               "pixels", scene.width * scene.height)
+        if device != "cpu":
+            r.add("denoise", name, f"pt-render {backend_name}", "denoise_seconds_cpu",
+                  times["cpu"], "s", "pixels", scene.width * scene.height)
+            r.add("denoise", name, f"pt-render {backend_name}", "denoised_gpu_vs_cpu_relMSE",
+                  rec["gpu_vs_cpu_relMSE"], "", "spp", low_spp)
         r.add("denoise", name, f"pt-render {backend_name}", "aov_seconds", t_aov, "s",
               "spp", AOV_SPP)
     return out
@@ -686,12 +703,13 @@ def summary(r, res, args):
             lines.append(f"| {scene} | {_fmt_time(u[0])} | {_fmt_time(a[0])} | "
                          f"{_fmt_time(u[1])} | {_fmt_time(a[1])} | {ratio} |")
     if res["denoise"]:
-        lines += ["", "## Denoising (Open Image Denoise, CPU; biased)", "",
+        lines += ["", "## Denoising (Open Image Denoise; biased)", "",
                   "relMSE against each scene's reference, the mean over the seeds given (+- its "
                   "standard error); the denoiser is guided by our albedo and normal images "
-                  "(first non-specular hit).", "",
+                  "(first non-specular hit); it runs where `pt-render --denoise` runs it "
+                  "(the GPU when rendering with CUDA, where OIDN's CUDA device works).", "",
                   "| scene | seeds | raw, low spp | denoised, low spp | raw, high spp | "
-                  "denoised / raw high | denoise s | albedo+normal pass s |",
+                  "denoised / raw high | denoise s (device) | albedo+normal pass s |",
                   "|---|---|---|---|---|---|---|---|"]
         for scene, x in res["denoise"].items():
             def pm(k):
@@ -699,7 +717,9 @@ def summary(r, res, args):
             lines.append(f"| {scene} | {x['seeds']} | {pm('raw_low')} ({x['low_spp']} spp) | "
                          f"{pm('denoised_low')} | {pm('raw_high')} ({x['high_spp']} spp) | "
                          f"{x['denoised_low'] / x['raw_high']:.2f} | "
-                         f"{x['denoise_s']:.3g} | {x['aov_s']:.3g} |")
+                         f"{x['denoise_s']:.3g} ({x.get('denoise_device', 'cpu')}"
+                         + (f"; CPU {x['denoise_cpu_s']:.3g}" if "denoise_cpu_s" in x else "")
+                         + f") | {x['aov_s']:.3g} |")
     thr = res["throughput"]
     if thr:
         lines += ["", "## Throughput (Cornell box)", "",

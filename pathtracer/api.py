@@ -375,6 +375,7 @@ class Result:
     signal: int = 0
     denoise_seconds: float = 0.0
     shares: object = None    # several devices or workers: each one's share of the samples
+    denoise_device: str = ""     # "cpu" or "cuda": where the image was denoised
 
     def __repr__(self):
         return (f"<Result {self.image.shape[1]}x{self.image.shape[0]}, {self.spp} spp in "
@@ -435,7 +436,7 @@ def output_files(output, denoised=False, aovs=False):
 def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
            callback=None, max_bounces=None, adaptive=None, aovs=False, denoise=False,
            pass_seconds=None, devices=None, ray=None, ray_workers=None, resume=None,
-           _backend_options=None, _on_stage=None):
+           denoise_device="auto", _backend_options=None, _on_stage=None):
     """Render ``scene`` (a :class:`Scene`, a path or a dict) to ``spp`` samples per pixel
     or for ``time`` seconds, whichever comes first (neither: the scene's spp).
 
@@ -444,7 +445,8 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
     ``max_bounces``: override the scene's. ``adaptive``: a target relMSE of the image
     for adaptive sampling (see progressive.render). ``aovs``: also render the albedo and
     normal images; ``denoise``: denoise the image with Open Image Denoise (``raw`` keeps
-    the noisy one). ``callback(progress)`` is called after every pass with a
+    the noisy one), on ``denoise_device``: "auto" (the GPU when rendering on CUDA and
+    OIDN's CUDA device runs here, else the CPU), "cpu" or "cuda". ``callback(progress)`` is called after every pass with a
     :class:`Progress`; returning False stops the render (the result holds the passes done). Ctrl-C stops it too. Returns a :class:`Result`.
 
     Several devices: ``devices`` (a list of CUDA device numbers, or "all") renders every
@@ -480,8 +482,13 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
     if sampler is not None and sampler not in SAMPLERS:
         raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)}, got {sampler!r}")
     if denoise:
-        from .denoise import check_available
+        from .denoise import DEVICES, check_available, resolve_device
+        if denoise_device not in DEVICES:
+            raise ValueError(f"denoise_device must be one of {', '.join(DEVICES)}, "
+                             f"got {denoise_device!r}")
         check_available()
+        if denoise_device == "cuda":
+            resolve_device("cuda", "cuda")     # an error now, before rendering
     split = None
     if devices is not None and ray is not None:
         raise ValueError("devices and ray: give one of them")
@@ -581,10 +588,12 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
     image = film.image()
     raw = None
     denoise_seconds = 0.0
+    dn_device = ""
     if denoise and film.spp > 0:
-        from .denoise import denoise as run_denoiser
+        from .denoise import denoise as run_denoiser, resolve_device
+        dn_device = resolve_device(denoise_device, be.name)
         t0 = _time.perf_counter()
-        raw, image = image, run_denoiser(image, aov_images)
+        raw, image = image, run_denoiser(image, aov_images, dn_device)
         denoise_seconds = _time.perf_counter() - t0
     seconds = r.seconds
     # (the rates count this render's rays: a resumed film holds earlier ones too)
@@ -596,7 +605,7 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
              "rays_per_second": sum(new_rays) / seconds if seconds > 0 else float("nan")}
     return Result(image, film.spp, seconds, compile_seconds, stopped, stats, scene.display,
                   raw, aov_images if aovs else None, film, r.passes, be.name, r.signal,
-                  denoise_seconds, be.shares() if hasattr(be, "shares") else None)
+                  denoise_seconds, be.shares() if hasattr(be, "shares") else None, dn_device)
 
 
 __all__ = ["Scene", "load_scene", "render", "Result", "Progress", "output_files",

@@ -185,8 +185,12 @@ def build_parser():
                         "they lower the image's error most); the render ends when all have, "
                         "or at --spp / --time")
     p.add_argument("--denoise", action="store_true",
-                   help="denoise with Open Image Denoise (CPU), guided by albedo and normal "
+                   help="denoise with Open Image Denoise, guided by albedo and normal "
                         "images: OUTPUT is the denoised image, OUTPUT_STEM-raw.EXT the raw one")
+    p.add_argument("--denoise-device", choices=("auto", "cpu", "cuda"), default="auto",
+                   help="where --denoise runs: auto (the default) on the GPU when rendering "
+                        "with CUDA and Open Image Denoise's CUDA device runs here, else on "
+                        "the CPU")
     p.add_argument("--aovs", action="store_true",
                    help="also write the albedo and normal images (OUTPUT_STEM-albedo.exr, "
                         "OUTPUT_STEM-normal.exr; .npy for a .npy output)")
@@ -578,6 +582,10 @@ def _render(args, scene_path, signals):
         where = f"cuda on {len(devices)} GPUs ({','.join(map(str, devices))})"
     elif args.ray:
         where = f"Ray cluster {args.ray}"
+    dn_device = "cpu"
+    if args.denoise:
+        from .denoise import resolve_device
+        dn_device = resolve_device(args.denoise_device, backend_name)
     print(f"pt-render: {scene_path}: {scene.width}x{scene.height}, {scene.n_triangles} "
           f"triangles, loaded in {load_seconds:.2f} s (BVH "
           f"{scene.compiled.timings['bvh_build']:.2f} s); backend {where}; features "
@@ -674,7 +682,7 @@ def _render(args, scene_path, signals):
         if args.denoise:
             from .denoise import denoise
             t_dn = time.perf_counter()
-            shown = denoise(image, aovs)
+            shown = denoise(image, aovs, dn_device)
             denoise_seconds.append(time.perf_counter() - t_dn)
         pick = dict(aovs or {}, image=shown, raw=image)
         return [pick[k] for k in kinds]
@@ -703,7 +711,8 @@ def _render(args, scene_path, signals):
         result = render_scene(scene, spp=spp, time=time_limit, seed=seed,
                               backend=backend_name, callback=on_pass,
                               max_bounces=args.max_bounces, adaptive=args.adaptive,
-                              aovs=args.aovs, denoise=args.denoise, devices=devices,
+                              aovs=args.aovs, denoise=args.denoise,
+                              denoise_device=dn_device, devices=devices,
                               ray=args.ray, ray_workers=args.ray_workers, resume=state,
                               _backend_options=options, _on_stage=on_stage)
     except BaseException:
@@ -733,7 +742,8 @@ def _render(args, scene_path, signals):
               f"pixels stopped (target image relMSE {args.adaptive:g})", file=log)
     if denoise_seconds:
         print(f"pt-render: denoised {len(denoise_seconds)} time(s), the last in "
-              f"{denoise_seconds[-1]:.2f} s (Open Image Denoise, CPU)", file=log)
+              f"{denoise_seconds[-1]:.2f} s (Open Image Denoise, "
+              f"{'GPU' if dn_device == 'cuda' else 'CPU'})", file=log)
     if reference is not None:
         try:
             with signals.deferred(raise_after=False), open(csv_path, "w", newline="") as f:

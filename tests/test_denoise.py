@@ -9,6 +9,7 @@ import pytest
 
 from pathtracer.backends import make_backend
 from pathtracer.denoise import denoise
+from pathtracer.errors import InputError
 from pathtracer.film import read_image, relmse
 from pathtracer.scene import load_scene
 from tests.conftest import ROOT
@@ -124,4 +125,30 @@ def test_missing_denoiser_is_a_one_line_error(tmp_path, flag):
     assert r.returncode == 2
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "pyoidn" in lines[0], r.stderr
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_denoise_device_follows_the_render():
+    """auto: the CPU unless the render runs on CUDA and OIDN's CUDA device runs here;
+    cpu is always the CPU; an unknown name is an input error."""
+    from pathtracer.denoise import cuda_denoiser_available, resolve_device
+    assert resolve_device("auto", "cpu") == "cpu"
+    assert resolve_device("cpu", "cuda") == "cpu"
+    assert resolve_device("auto", "cuda") == ("cuda" if cuda_denoiser_available() else "cpu")
+    with pytest.raises(InputError):
+        resolve_device("gpu", "cuda")
+
+
+def test_cuda_denoiser_without_a_gpu_is_a_one_line_error(tmp_path):
+    """--denoise-device cuda where OIDN's CUDA device cannot run: exit 2 before rendering,
+    one line that names the way out, nothing written."""
+    from pathtracer.denoise import cuda_denoiser_available
+    if cuda_denoiser_available():
+        pytest.skip("OIDN's CUDA device runs here (tests/test_gpu.py uses it)")
+    scene = write_scene(tmp_path, furnace_scene(0.5, 0.5, 2, res=(8, 8)))
+    r = _pt_render(scene, "-o", tmp_path / "x.png", "--denoise", "--denoise-device", "cuda",
+                   "--backend", "cpu")
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--denoise-device cpu" in lines[0], r.stderr
     assert not (tmp_path / "x.png").exists()
