@@ -370,29 +370,29 @@ def section_denoise(scenes, backend_name, low_spp, high_spp, repeats, r, seeds=1
         backend = make_backend(backend_name, scene)
         backend.compile()
         backend.aovs(1, 0)                                   # compile the auxiliary pass
-        low = render(scene, backend, spp=low_spp).film.image()
-        t_aov, _ = median_time(lambda: backend.aovs(AOV_SPP, 0), repeats)
-        aovs = backend.aovs(AOV_SPP, 0)
         device = resolve_device("auto", backend_name)
-        times = {}
-        for d in sorted({device, "cpu"}):
-            denoise(low, aovs, d)                            # the denoiser's set-up
-            times[d], _ = median_time(lambda: denoise(low, aovs, d), repeats)
-        t_dn = times[device]
         errs = {"raw_low": [], "denoised_low": [], "raw_high": []}
         for seed in range(seeds):
             low = render(scene, backend, spp=low_spp, seed=seed).film.image()
+            aovs = backend.aovs(AOV_SPP, seed)
+            if seed == 0:
+                low0, aovs0 = low, aovs                     # (timed below)
             errs["raw_low"].append(relmse(low, ref))
-            errs["denoised_low"].append(relmse(denoise(low, backend.aovs(AOV_SPP, seed),
-                                                       device), ref))
+            errs["denoised_low"].append(relmse(denoise(low, aovs, device), ref))
             errs["raw_high"].append(relmse(render(scene, backend, spp=high_spp,
                                                   seed=seed).film.image(), ref))
+        t_aov, _ = median_time(lambda: backend.aovs(AOV_SPP, 0), repeats)
+        times = {}
+        for d in sorted({device, "cpu"}):
+            denoise(low0, aovs0, d)                          # the denoiser's set-up
+            times[d], _ = median_time(lambda: denoise(low0, aovs0, d), repeats)
+        t_dn = times[device]
         rec = {"low_spp": low_spp, "high_spp": high_spp, "seeds": seeds,
                "denoise_device": device, "denoise_s": t_dn, "aov_s": t_aov}
         if device != "cpu":
             rec["denoise_cpu_s"] = times["cpu"]
-            rec["gpu_vs_cpu_relMSE"] = relmse(denoise(low, aovs, device),
-                                              denoise(low, aovs, "cpu"))
+            rec["gpu_vs_cpu_relMSE"] = relmse(denoise(low0, aovs0, device),
+                                              denoise(low0, aovs0, "cpu"))
         for k, v in errs.items():
             rec[k], rec[k + "_stderr"] = mean_and_error(v)
         out[name] = rec
