@@ -18,6 +18,7 @@ The colour is denoised as HDR (linear radiance, any range). A denoised image is 
 estimate, not an unbiased one: the raw image is always written beside it.
 """
 import importlib
+import warnings
 
 import numpy as np
 
@@ -124,6 +125,7 @@ class _CudaFilter:
 
 
 _cuda_filter = [None]
+_cuda_failed = []       # the GPU denoiser's error, once it has failed in this process
 
 
 def _denoise_cuda(color, albedo, normal):
@@ -149,6 +151,15 @@ def denoise(color, aovs, device="cpu"):
     albedo = np.ascontiguousarray(np.clip(albedo, 0.0, 1.0), np.float32)
     normal = np.ascontiguousarray(np.clip(normal, -1.0, 1.0), np.float32)
     color = np.ascontiguousarray(np.maximum(color, 0.0), np.float32)
-    if device == "cuda":
-        return _denoise_cuda(color, albedo, normal)
+    if device == "cuda" and not _cuda_failed:
+        try:
+            return _denoise_cuda(color, albedo, normal)
+        except RuntimeError as e:
+            # (e.g. no GPU memory left for a large image): a long render's saves go on,
+            # denoised on the CPU from here, rather than stop at a save
+            _cuda_failed.append(str(e))
+            if _cuda_filter[0] is not None:
+                _cuda_filter[0].release()
+                _cuda_filter[0] = None
+            warnings.warn(f"{e}; denoising on the CPU instead")
     return pyoidn.denoise(color, albedo, normal, hdr=True)

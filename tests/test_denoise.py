@@ -152,3 +152,24 @@ def test_cuda_denoiser_without_a_gpu_is_a_one_line_error(tmp_path):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "--denoise-device cpu" in lines[0], r.stderr
     assert not (tmp_path / "x.png").exists()
+
+
+def test_a_failing_gpu_denoiser_falls_back_to_the_cpu(tmp_path, monkeypatch):
+    """When OIDN's CUDA device fails mid-render (say, no GPU memory left for a large image),
+    the save warns once and denoises on the CPU from then on, instead of stopping the
+    render at a save."""
+    import pathtracer.denoise as dn
+    calls = []
+
+    def broken(*args):
+        calls.append(1)
+        raise RuntimeError("Open Image Denoise (CUDA), execution: out of memory")
+    monkeypatch.setattr(dn, "_denoise_cuda", broken)
+    monkeypatch.setattr(dn, "_cuda_failed", [])
+    scene = load_scene(write_scene(tmp_path, furnace_scene(0.5, 0.5, 2, res=(24, 16))))
+    raw = run(scene, "cpu", spp=2).film.image()
+    aov = make_backend("cpu", scene).aovs(2, 0)
+    with pytest.warns(UserWarning, match="denoising on the CPU instead"):
+        first = denoise(raw, aov, "cuda")
+    assert np.array_equal(first, denoise(raw, aov, "cpu"))
+    assert np.array_equal(denoise(raw, aov, "cuda"), first) and len(calls) == 1
