@@ -446,8 +446,10 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
     for adaptive sampling (see progressive.render). ``aovs``: also render the albedo and
     normal images; ``denoise``: denoise the image with Open Image Denoise (``raw`` keeps
     the noisy one), on ``denoise_device``: "auto" (the GPU when rendering on CUDA and
-    OIDN's CUDA device runs here, else the CPU), "cpu" or "cuda". ``callback(progress)`` is called after every pass with a
-    :class:`Progress`; returning False stops the render (the result holds the passes done). Ctrl-C stops it too. Returns a :class:`Result`.
+    OIDN's CUDA device runs here, else the CPU), "cpu" or "cuda". ``callback(progress)``
+    is called after every pass with a :class:`Progress`; returning False stops the
+    render (the result holds the passes done). Ctrl-C stops it too. Returns a
+    :class:`Result`.
 
     Several devices: ``devices`` (a list of CUDA device numbers, or "all") renders every
     pass on those GPUs at once; ``ray`` (an address, or "local" for a Ray runtime on this
