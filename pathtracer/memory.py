@@ -20,8 +20,9 @@ DEVICE_BYTES_PER_PIXEL = 48
 # per-triangle kernel arrays); the parsed mesh itself is not included.
 TRIANGLE_BYTES = 1200
 # A texture: its decoded 8-bit/float source, the float32 texels, the concatenated table
-# (with the mip levels of a trilinear texture, a third more, and the halving's temporary).
-TEXEL_BYTES = 48
+# (16 bytes a texel, layout.TEXEL_WIDTH; with the mip levels of a trilinear texture, a
+# third more, and the halving's temporary).
+TEXEL_BYTES = 56
 
 GIB = 2.0 ** 30
 

@@ -105,8 +105,8 @@ def test_trimesh_textures_channels_and_orientation(tmp_path):
     from pathtracer.kernels.layout import TEX_FIRST
     t = c.arrays.tex_int
     texels = c.arrays.tex_data
-    rough = texels[t[1, TEX_FIRST]:t[1, TEX_FIRST] + 4]
-    metal = texels[t[2, TEX_FIRST]:t[2, TEX_FIRST] + 4]
+    rough = texels[t[1, TEX_FIRST]:t[1, TEX_FIRST] + 4, :3]
+    metal = texels[t[2, TEX_FIRST]:t[2, TEX_FIRST] + 4, :3]
     assert np.allclose(rough, 128 / 255) and np.allclose(metal, 1.0)
     r = pt.render(scene, spp=4, backend="cpu", aovs=True)
     albedo = r.aovs["albedo"]

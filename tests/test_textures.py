@@ -29,9 +29,18 @@ def test_srgb_decode_is_exact_piecewise():
     assert abs(srgb_to_linear(0.5) - 0.5 ** 2.2) > 1e-3      # not a 2.2 power
 
 
+def texel_rows(img):
+    """The texels of img (..., 3) as the scene compiler stores them: rows of
+    layout.TEXEL_WIDTH floats, rgb and a zero."""
+    px = np.asarray(img).reshape(-1, 3)
+    data = np.zeros((len(px), L.TEXEL_WIDTH), F)
+    data[:, :3] = px
+    return data
+
+
 def _tex(img, filt=0, tile=(1, 1), offset=(0, 0), scale=(1, 1, 1), wrap=0):
     h, w = img.shape[:2]
-    data = img.reshape(-1, 3).astype(F)
+    data = texel_rows(img)
     ti = np.array([[0, w, h, filt, wrap, 1]], np.int32)
     tf = np.array([[*tile, *offset, *scale]], F)
     return lambda u, v: np.array(tex_lookup(data, ti, tf, 0, F(u), F(v), NO_FOOTPRINT))
@@ -76,7 +85,7 @@ def test_wrap_modes_mirror_and_clamp():
     # the same lookups, compiled
     from numba import njit
     h, w = img.shape[:2]
-    data = img.reshape(-1, 3).astype(F)
+    data = texel_rows(img)
     ti = np.array([[0, w, h, 0, WRAP_MIRROR | (WRAP_CLAMP << 2), 1]], np.int32)
     tf = np.array([[1, 1, 0, 0, 1, 1, 1]], F)
     lookup = njit(lambda u, v: tex_lookup(data, ti, tf, 0, u, v, NO_FOOTPRINT))
@@ -280,7 +289,7 @@ def _mip_tex(img, tile=(1, 1)):
     """A trilinear texture of img with its levels, as the scene compiler stores it."""
     from pathtracer.scene.images import mip_pyramid
     levels = mip_pyramid(img.astype(F))
-    data = np.concatenate([lv.reshape(-1, 3) for lv in levels])
+    data = texel_rows(np.concatenate([lv.reshape(-1, 3) for lv in levels]))
     ti = np.array([[0, img.shape[1], img.shape[0], L.FILTER_TRILINEAR, 0, len(levels)]],
                   np.int32)
     tf = np.array([[*tile, 0, 0, 1, 1, 1]], F)

@@ -182,6 +182,8 @@ TEX_FILTER = 3        # FILTER_BILINEAR, FILTER_NEAREST or FILTER_TRILINEAR
 TEX_WRAP = 4          # u's WRAP_* in bits 0-1, v's in bits 2-3
 TEX_LEVELS = 5        # mip levels stored from TEX_FIRST on (1: the image alone)
 TEX_INT_WIDTH = 6
+# a texel in tex_data: r, g, b and a zero, so that one 16-byte load reads it (kernels.loads)
+TEXEL_WIDTH = 4
 TEX_TILE = 0          # u, v
 TEX_OFFSET = 2        # u, v
 TEX_SCALE = 4         # r, g, b
@@ -352,7 +354,7 @@ class SceneArrays(NamedTuple):
     tri_uv: np.ndarray         # float32 (N, TRI_UV_WIDTH) (textures only)
     tri_t: np.ndarray          # float32 (N, TRI_T_WIDTH) (tangents only)
     mat_tex: np.ndarray        # int32 (M, N_SLOTS)
-    tex_data: np.ndarray       # float32 (T, 3) linear texels of all textures
+    tex_data: np.ndarray       # float32 (T, TEXEL_WIDTH) linear texels of all textures
     tex_int: np.ndarray        # int32 (K, TEX_INT_WIDTH)
     tex_f: np.ndarray          # float32 (K, TEX_F_WIDTH)
     env_img: np.ndarray        # float32 (H, W, 3) see kernels.envmap

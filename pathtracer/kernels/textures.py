@@ -16,6 +16,7 @@ import numpy as np
 from .constants import HALF, ONE, TWO, ZERO
 from .device import device
 from .fmath import floor_int, fract
+from .loads import load4
 from .layout import (FILTER_NEAREST, FILTER_TRILINEAR, TEX_FILTER, TEX_FIRST, TEX_HEIGHT,
                      TEX_LEVELS, TEX_OFFSET, TEX_SCALE, TEX_TILE, TEX_WIDTH, TEX_WRAP, TRI_UV0,
                      TRI_UV1, TRI_UV2, WRAP_MIRROR, WRAP_REPEAT)
@@ -68,7 +69,8 @@ def wrap_index(i, n, mode):
 @device
 def texel(tex_data, base, width, i, j):
     k = base + j * width + i
-    return tex_data[k, 0], tex_data[k, 1], tex_data[k, 2]
+    r, g, b, _ = load4(tex_data, k, 0)       # (one 16-byte load: layout.TEXEL_WIDTH)
+    return r, g, b
 
 
 @device

@@ -36,6 +36,7 @@ from ..kernels.layout import (CAM_CONE, CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_
                               NO_TEXTURE, PL_INTENSITY, PL_POSITION, PL_WIDTH, T_ALBEDO, T_EMISSION,
                               T_NORMAL, TEX_F_WIDTH, TEX_FILTER, TEX_WRAP, WRAP_CLAMP, WRAP_MIRROR,
                               WRAP_REPEAT, TEX_FIRST, TEX_HEIGHT, TEX_INT_WIDTH, TEX_LEVELS,
+                              TEXEL_WIDTH,
                               TEX_OFFSET, TEX_SCALE, TEX_TILE, TEX_WIDTH, TRI_E1, TRI_E2,
                               TRI_N_WIDTH, TRI_T0, TRI_T_SIGN, TRI_T_WIDTH, TRI_UV_WIDTH, TRI_V0,
                               TRI_V_WIDTH, Features, SceneArrays, point_light_ref)
@@ -341,7 +342,7 @@ class MaterialTables:
         mat_tex = (np.stack(self.tex_rows) if self.tex_rows else
                    np.full((1, N_SLOTS), NO_TEXTURE, np.int32))
         if not self.tex_images:
-            return (mat, mat_tex, np.zeros((1, 3), np.float32),
+            return (mat, mat_tex, np.zeros((1, TEXEL_WIDTH), np.float32),
                     np.zeros((1, TEX_INT_WIDTH), np.int32), np.zeros((1, TEX_F_WIDTH), np.float32))
         mipmapped = [p[0] == "trilinear" for p in self.tex_params]
         levels = [mip_levels(*im.shape[:2]) if mip else 1
@@ -349,15 +350,13 @@ class MaterialTables:
         sizes = [mip_texels(*im.shape[:2], n) for im, n in zip(self.tex_images, levels)]
 
         def texels():
-            # (one texture without levels: a view, not a copy; the texels are float32)
-            if len(self.tex_images) == 1 and not mipmapped[0]:
-                return self.tex_images[0].reshape(-1, 3)
-            # one allocation; each mip level written in place from the one before
-            out = np.empty((sum(sizes), 3), np.float32)
+            # one allocation; each mip level written in place from the one before. A texel
+            # is a row of TEXEL_WIDTH floats (rgb and a zero): one 16-byte load reads it
+            out = np.zeros((sum(sizes), TEXEL_WIDTH), np.float32)
             at = 0
             for im, mip in zip(self.tex_images, mipmapped):
                 for level in (mip_chain(im) if mip else [im]):
-                    out[at:at + level.shape[0] * level.shape[1]] = level.reshape(-1, 3)
+                    out[at:at + level.shape[0] * level.shape[1], :3] = level.reshape(-1, 3)
                     at += level.shape[0] * level.shape[1]
             return out
         if sum(sizes) >= 2 ** 31:     # (checked before the texel array is allocated)
