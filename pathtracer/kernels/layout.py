@@ -183,6 +183,7 @@ TEX_WRAP = 4          # u's WRAP_* in bits 0-1, v's in bits 2-3
 TEX_LEVELS = 5        # mip levels stored from TEX_FIRST on (1: the image alone)
 TEX_INT_WIDTH = 6
 # a texel in tex_data: r, g, b and a zero, so that one 16-byte load reads it (kernels.loads)
+TEXEL_RGB = 0
 TEXEL_WIDTH = 4
 TEX_TILE = 0          # u, v
 TEX_OFFSET = 2        # u, v

@@ -18,8 +18,8 @@ from .device import device
 from .fmath import floor_int, fract
 from .loads import load4
 from .layout import (FILTER_NEAREST, FILTER_TRILINEAR, TEX_FILTER, TEX_FIRST, TEX_HEIGHT,
-                     TEX_LEVELS, TEX_OFFSET, TEX_SCALE, TEX_TILE, TEX_WIDTH, TEX_WRAP, TRI_UV0,
-                     TRI_UV1, TRI_UV2, WRAP_MIRROR, WRAP_REPEAT)
+                     TEX_LEVELS, TEX_OFFSET, TEX_SCALE, TEX_TILE, TEX_WIDTH, TEX_WRAP, TEXEL_RGB,
+                     TRI_UV0, TRI_UV1, TRI_UV2, WRAP_MIRROR, WRAP_REPEAT)
 from .vec import cross, dot, normalize
 
 # Incidence cosines below this count as this (a grazing hit picks the coarsest levels
@@ -69,7 +69,7 @@ def wrap_index(i, n, mode):
 @device
 def texel(tex_data, base, width, i, j):
     k = base + j * width + i
-    r, g, b, _ = load4(tex_data, k, 0)       # (one 16-byte load: layout.TEXEL_WIDTH)
+    r, g, b, _ = load4(tex_data, k, TEXEL_RGB)     # one 16-byte load (layout.TEXEL_WIDTH)
     return r, g, b
 
 
