@@ -2,13 +2,15 @@
 (``--ray``), against the one-device render of the same scene in the same run.
 
     python -m bench.distributed gpus [--scenes cornell-box bunny-studio] [--repeats 3]
+                                     [--devices 0 1]
     python -m bench.distributed ray [--workers 2] [--scenes cornell-box]
 
 ``gpus``: per scene, paths/s of whole renders (progressive passes, compile excluded) on one
-GPU and on all GPUs (SplitBackend, one thread per GPU), alternating, the median of
-``--repeats`` after a warm-up render of each; the speed-up, each GPU's share of the
-samples, and how far the split image is from the one-GPU image (max per-pixel relative
-difference, with values below 1e-3 compared absolutely, and the relMSE between them).
+GPU and on all GPUs (or those of ``--devices``; SplitBackend, one thread per GPU),
+alternating, the median of ``--repeats`` after a warm-up render of each; the speed-up,
+each GPU's share of the samples, and how far the split image is from the one-GPU image
+(max per-pixel relative difference, with values below 1e-3 compared absolutely, and the
+relMSE between them).
 ``ray``: the same on the CPU with a local Ray runtime (``--ray local --ray-workers N``)
 against the single-process CPU render; Ray's start (runtime and workers, their kernels
 loaded from the disk cache) is reported apart from the renders.
@@ -47,7 +49,7 @@ def difference(a, b):
             "relmse_between": float(np.mean((a - b) ** 2 / (a * a + 0.01)))}
 
 
-def run(mode, scenes, repeats, workers, spp_scale=1):
+def run(mode, scenes, repeats, workers, spp_scale=1, devices="all"):
     import pathtracer as pt
     record = {"command": command(), "machine": machine(), "date": now(),
               "versions": versions(), "mode": mode, "scenes": {}}
@@ -56,7 +58,8 @@ def run(mode, scenes, repeats, workers, spp_scale=1):
         record["gpus"] = [cuda.gpus[i].name.decode() if isinstance(cuda.gpus[i].name, bytes)
                           else str(cuda.gpus[i].name) for i in range(len(cuda.gpus))]
         one = dict(backend="cuda")
-        split = dict(devices="all")
+        split = dict(devices=devices)
+        record["devices"] = devices
     else:
         t0 = time.perf_counter()
         from pathtracer import cluster
@@ -107,7 +110,9 @@ def main(argv=None):
     p.add_argument("mode", choices=("gpus", "ray"))
     p.add_argument("--scenes", nargs="+", default=None)
     p.add_argument("--repeats", type=int, default=3)
-    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--workers", type=int, default=2, help="ray: the number of Ray workers")
+    p.add_argument("--devices", type=int, nargs="+", default=None,
+                   help="gpus: split over these CUDA device numbers (default: all)")
     p.add_argument("--spp-scale", type=float, default=1,
                    help="renders this many times longer (the steady state of long renders: "
                         "the first passes of a render are short and each pass costs a "
@@ -115,7 +120,10 @@ def main(argv=None):
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
     scenes = args.scenes or list(SETTINGS[args.mode])
-    record = run(args.mode, scenes, args.repeats, args.workers, args.spp_scale)
+    if args.devices is not None and args.mode != "gpus":
+        p.error("--devices: the gpus mode's option")
+    record = run(args.mode, scenes, args.repeats, args.workers, args.spp_scale,
+                 args.devices if args.devices is not None else "all")
     out = args.out or os.path.join(ROOT, "bench", "results", f"distributed-{args.mode}.json")
     with open(out, "w") as f:
         json.dump(record, f, indent=1)
