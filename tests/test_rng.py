@@ -42,9 +42,10 @@ def test_python_and_cpu_agree_bit_for_bit():
 
 @njit(cache=True)
 def _compiled_bits(xs, seeds):
-    out = np.empty((len(xs), 7), np.uint64)
+    out = np.empty((len(xs), 8), np.uint64)
     for i in range(len(xs)):
         x = xs[i]
+        out[i, 7] = bits.udiv32(x, seeds[i] | np.uint64(1))
         out[i, 0] = bits.pcg_hash(x)
         out[i, 1] = bits.reverse_bits(x)
         out[i, 2] = bits.lk_permutation(x, seeds[i])
@@ -54,8 +55,9 @@ def _compiled_bits(xs, seeds):
 
 
 def test_32_bit_ir_equals_the_python_bodies(rng):
-    """The hashes compile to 32-bit LLVM IR (rng._ir32) and run as their plain Python bodies
-    when interpreted: both must give every bit the same, at the edges of 32 bits too."""
+    """The hashes (and udiv32, the wavefront's path numbering) compile to 32-bit LLVM IR
+    (rng._ir32) and run as their plain Python bodies when interpreted: both must give every
+    bit the same, at the edges of 32 bits too."""
     xs = np.array([0, 1, 2, 2**31, 2**32 - 1] + rng.integers(0, 2**32, 3000).tolist(),
                   np.uint64)
     seeds = np.array([2**32 - 1, 0, 7, 1, 2**31] + rng.integers(0, 2**32, 3000).tolist(),
@@ -63,7 +65,8 @@ def test_32_bit_ir_equals_the_python_bodies(rng):
     got = _compiled_bits(xs, seeds)
     for i, (x, seed) in enumerate(zip(xs, seeds)):
         want = [bits.pcg_hash(x), bits.reverse_bits(x), bits.lk_permutation(x, seed),
-                *bits.sobol_digits(x), bits.owen_scramble(x, seed)]
+                *bits.sobol_digits(x), bits.owen_scramble(x, seed),
+                int(x) // (int(seed) | 1)]
         assert [int(v) for v in got[i]] == [int(v) for v in want], (int(x), int(seed))
     # known values: reverse_bits(2) = 2**30; the Sobol digits (reversed bit order) of
     # index 0: none; of index 1: 1/2 in each dimension; of index 2: 3/4

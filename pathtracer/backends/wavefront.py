@@ -47,6 +47,7 @@ from ..memory import device_free_bytes
 from .launch import Launcher
 from ..kernels.constants import STACK_SIZE
 from ..kernels.integrator import make_wavefront
+from ..kernels.rng import udiv32
 from ..kernels.layout import (HIT_F_WIDTH, M_TYPE, MAT_PRINCIPLED, PATH_F_WIDTH,
                               PATH_I_WIDTH)
 
@@ -146,8 +147,10 @@ def wavefront_kernels(features, max_registers=None, fast=False, sort_hits=False)
             append = False
             if path < n_paths:
                 wave_start(path, sample_start, width, height, seed, scene, paths_f, paths_i)
-                pixel = path % (width * height)
-                append = active[pixel // width, pixel % width] != 0
+                # (32-bit divisions: kernels.rng.udiv32)
+                pixel = path - np.int64(udiv32(path, width * height)) * (width * height)
+                py = np.int64(udiv32(pixel, width))
+                append = active[py, pixel - py * width] != 0
             push(queue, counts, PATHS, path, append, False)
 
     @cuda.jit(cache=jit_cache(), **plain_options)

@@ -38,7 +38,7 @@ from .layout import (AOV_ALBEDO, AOV_NORMAL, CAM_CONE, D_BSDF_LOBE, D_BSDF_U, D_
                      P_ROUGHNESS, P_TRANSMISSION, STAT_BOUNCE_RAYS, STAT_NONFINITE,
                      STAT_SHADOW_RAYS, TRI_E1, TRI_E2, TRI_V0, Features, SceneArrays,
                      specialise)
-from .rng import make_sampler
+from .rng import make_sampler, udiv32
 from .scatter import make_scatter
 from .surface import make_surface
 from .textures import NO_FOOTPRINT, cone_footprint
@@ -591,11 +591,18 @@ def make_kernels(features, target="cpu"):
         paths_i[PATH_BOUNCE, path] = bounce
 
     @step
+    def path_pixel(path, pixels):
+        """(pixel, sample - sample_start) of path number ``path`` (see the numbering
+        above), with a 32-bit division: path < 2**32."""
+        q = np.int64(udiv32(path, pixels))
+        return path - q * pixels, q
+
+    @step
     def resume_path(path, sample_start, width, height, seed, scene, paths_f, paths_i):
         """Path ``path`` as a launch takes it up: its sampler state, the camera's cone
         spread and its stored state (load_path)."""
-        pixels = width * height
-        state = start_path(path % pixels, sample_start + path // pixels, seed)
+        pixel, offset = path_pixel(path, width * height)
+        state = start_path(pixel, sample_start + offset, seed)
         spread = ZERO
         if MIPMAPS:
             spread = scene.cam[CAM_CONE]
@@ -604,11 +611,9 @@ def make_kernels(features, target="cpu"):
     @entry
     def wave_start(path, sample_start, width, height, seed, scene, paths_f, paths_i):
         """Path ``path``'s camera ray (see the numbering above)."""
-        pixels = width * height
-        pixel = path % pixels
-        px = pixel % width
-        py = pixel // width
-        state = start_path(pixel, sample_start + path // pixels, seed)
+        pixel, offset = path_pixel(path, width * height)
+        px, py = path_pixel(pixel, width)
+        state = start_path(pixel, sample_start + offset, seed)
         o, d, beta, radiance, pdf_prev, skip, bounce, cone = start_camera_path(
             scene.cam, px, py, state, width, height)
         store_path(paths_f, paths_i, path, o, d, beta, radiance, pdf_prev, skip, bounce, cone)
