@@ -104,8 +104,8 @@ def mitsuba_dict(desc, spp=1, sampler="independent"):
     cam = desc.camera
     if cam.look_at is None or cam.lens_radius > 0:
         raise NotExpressible("camera without lookAt, or a thin lens")
-    if desc.point_lights:
-        raise NotExpressible("point lights")
+    if desc.point_lights or desc.directional_lights:
+        raise NotExpressible("point or directional lights")
     w, h = cam.resolution
     d = {"type": "scene",
          "integrator": {"type": "path", "max_depth": desc.render.max_bounces + 1,

@@ -213,12 +213,69 @@ def test_camera_and_point_light(tmp_path):
         pt.load_scene(path, camera="7")
 
 
+def test_directional_light_is_a_far_point_light_with_the_suns_irradiance(tmp_path):
+    """A glTF directional light (along the node's -Z, illuminance in lux) is the scene
+    format's directional light (irradiance lux / 683 W m^-2), which the compiler renders as
+    a point light SUN_DISTANCE radii of the geometry's sphere away against its direction,
+    giving that irradiance at the sphere's centre; a warning says so. Beside a point lamp
+    it does not take every light sample: the light pdf counts the power that reaches the
+    geometry."""
+    from pathtracer.kernels import layout as L
+    from pathtracer.scene.compile import SUN_DISTANCE, reaching_fraction
+    b = Builder()
+    b.node(mesh=b.mesh(QUAD_V * 2 + [1, 0, 0], QUAD_F))   # centre (1, 0, 0), radius 2 sqrt 2
+    sun = b.light({"type": "directional", "color": [1, 0.9, 0.8], "intensity": 683 * 3})
+    direction = np.array([1.0, -2.0, 0.5]) / math.sqrt(5.25)
+    b.node(translation=[5, 5, 5], rotation=look_at_rotation([0, 0, 0], direction),
+           extensions={"KHR_lights_punctual": {"light": sun}})
+    lamp = b.light({"type": "point", "intensity": 683 * 10})
+    b.node(translation=[1, 0, 1], extensions={"KHR_lights_punctual": {"light": lamp}})
+    path = b.save(tmp_path / "sun.glb")
+    scene = pt.load_scene(path)
+    assert any("directional light 0" in w for w in scene.warnings)
+    directional, = [li for li in scene.data["lights"] if li["type"] == "directional"]
+    assert np.allclose(directional["direction"], direction, atol=1e-9)
+    assert np.allclose(directional["irradiance"], np.array([1, 0.9, 0.8]) * 3)
+    arrays, shift = scene.compiled.arrays, np.asarray(scene.compiled.origin_shift)
+    rows = arrays.point_lights.astype(np.float64)
+    positions = rows[:, L.PL_POSITION:L.PL_POSITION + 3] + shift
+    far = int(np.argmax(np.linalg.norm(positions - [1, 0, 0], axis=1)))
+    centre, radius = np.array([1.0, 0.0, 0.0]), 2 * math.sqrt(2)
+    offset = positions[far] - centre
+    distance = np.linalg.norm(offset)
+    assert distance == pytest.approx(SUN_DISTANCE * radius, rel=1e-6)
+    assert np.allclose(-offset / distance, direction, atol=1e-6)
+    irradiance = rows[far, L.PL_INTENSITY:L.PL_INTENSITY + 3] / distance ** 2
+    assert np.allclose(irradiance, np.array([1, 0.9, 0.8]) * 3, rtol=1e-5)
+    # the light distribution: the sun's share is the power reaching the geometry's sphere
+    pmf = np.diff(arrays.light_cdf.astype(np.float64))
+    sun_power = 4 * math.pi * 2.7 * distance ** 2 * reaching_fraction(positions[far],
+                                                                     (centre, radius))
+    lamp_power = 4 * math.pi * 10
+    assert sorted(pmf) == pytest.approx(sorted([sun_power, lamp_power]) / np.float64(
+        sun_power + lamp_power), rel=1e-3)
+    assert min(pmf) > 0.1                  # the lamp still gets its share of light samples
+
+
+def test_reaching_fraction_is_the_solid_angle_of_the_geometrys_sphere():
+    from pathtracer.scene.compile import reaching_fraction
+    sphere = (np.zeros(3), 1.0)
+    assert reaching_fraction([0.5, 0, 0], sphere) == 1.0           # inside
+    for d in (1.5, 10.0, 1e4):
+        cos_a = math.sqrt(1 - 1 / d ** 2)
+        assert reaching_fraction([0, d, 0], sphere) == pytest.approx((1 - cos_a) / 2,
+                                                                    rel=1e-9)
+    # far away: the disc's area over the sphere of radius d, pi / (4 pi d^2)
+    assert reaching_fraction([0, 0, 1e6], sphere) == pytest.approx(0.25e-12, rel=1e-6)
+    assert reaching_fraction([3, 0, 0], None) == 1.0
+
+
 def test_spot_light_and_required_extension_are_clear_errors(tmp_path):
     b = Builder()
     b.node(mesh=b.mesh(QUAD_V, QUAD_F))
     li = b.light({"type": "spot", "spot": {}})
     b.node(extensions={"KHR_lights_punctual": {"light": li}})
-    with pytest.raises(SceneError, match="spot light.*point lights only"):
+    with pytest.raises(SceneError, match="spot light.*spot lights are not supported"):
         read_model(b.save(tmp_path / "spot.glb"))
     b = Builder()
     b.node(mesh=b.mesh(QUAD_V, QUAD_F))

@@ -114,6 +114,27 @@ def test_defaults_refs_materials_and_emitters(tmp_path):
                                 "rotation": pytest.approx(20.0)}
 
 
+def test_directional_emitter(tmp_path):
+    """Mitsuba's directional emitter (radiating along `direction`, or along +Z of
+    to_world) is the scene format's directional light; giving both is an error."""
+    head = SENSOR + '<shape type="rectangle"><bsdf type="diffuse"/></shape>\n'
+    d, _ = convert_file(write(tmp_path, head + '<emitter type="directional"><vector '
+                              'name="direction" value="1, -2, 0.5"/><rgb name="irradiance" '
+                              'value="3"/></emitter>'))
+    assert d["lights"] == [{"type": "directional", "direction": [1.0, -2.0, 0.5],
+                            "irradiance": [3.0] * 3}]
+    d, _ = convert_file(write(tmp_path, head + '<emitter type="directional"><transform '
+                              'name="to_world"><rotate x="1" angle="90"/></transform>'
+                              '</emitter>'))
+    light, = d["lights"]
+    assert np.allclose(light["direction"], [0, -1, 0], atol=1e-12)     # +Z turned about +X
+    assert light["irradiance"] == [1.0] * 3
+    with pytest.raises(pt.SceneError, match="not both"):
+        convert_file(write(tmp_path, head + '<emitter type="directional"><vector '
+                           'name="direction" value="0, 0, 1"/><transform name="to_world">'
+                           '<rotate x="1" angle="90"/></transform></emitter>'))
+
+
 def test_area_emitter_gets_its_own_material(tmp_path):
     body = SENSOR + """<bsdf type="diffuse" id="white"><rgb name="reflectance" value="0.8"/></bsdf>
 <shape type="rectangle" id="lamp"><ref id="white"/><emitter type="area">

@@ -9,7 +9,7 @@ import pytest
 from pathtracer.backends import make_backend
 from pathtracer.film import relmse
 from pathtracer.progressive import render
-from pathtracer.scene import load_scene
+from pathtracer.scene import SceneError, load_scene
 from tests.conftest import BACKENDS, ROOT, SHARED, gpu, needs_shared
 from tests.helpers import furnace_scene, mean_and_se, run, write_scene
 
@@ -140,6 +140,45 @@ def test_smooth_normals_render_finite(tmp_path):
     # the flat-shaded one, and puts none on the far side.
     assert img[:, 16:].sum() == pytest.approx(flat[:, 16:].sum(), rel=0.1)
     assert img[:, :12].max() == 0 and flat[:, :12].max() == 0
+
+
+def test_directional_light_irradiance(tmp_path):
+    """A directional light of irradiance E at 60 degrees from a Lambertian plane's normal:
+    L = a/pi E cos 60 everywhere (compiled as a point light 1,000 radii of the geometry
+    away: within 0.2 % across it). Beside it a point lamp far from the plane still gets its
+    share of light samples (scene.compile.reaching_fraction), so its light is not noise."""
+    albedo, e = 0.8, 2.0
+    theta = np.radians(60.0)
+    scene_dict = {
+        "camera": {"resolution": [8, 8], "position": [0, 0, 3], "lookAt": [0, 0, 0],
+                   "up": [0, 1, 0], "fov": 20},
+        "render": {"maxBounces": 1},
+        "materials": [{"name": "m", "type": "diffuse", "albedo": albedo}],
+        "objects": [{"name": "plane", "vertices": [[-2, -2, 0], [2, -2, 0], [2, 2, 0],
+                                                   [-2, 2, 0]],
+                     "faces": [[0, 1, 2], [0, 2, 3]], "material": "m"}],
+        "lights": [{"type": "directional", "direction": [np.sin(theta), 0, -np.cos(theta)],
+                    "irradiance": e}],
+    }
+    scene = load_scene(write_scene(tmp_path, scene_dict))
+    img = run(scene, "cpu", spp=4).film.image()
+    want = albedo / np.pi * e * np.cos(theta)
+    assert np.abs(img / want - 1).max() < 2e-3
+    # with a lamp 20 above the plane (outside the geometry's sphere) the two add up (were
+    # the far point light's whole power counted, the lamp would get ~1e-5 of the light
+    # samples: its light would be missing at 64 spp)
+    scene_dict["lights"].append({"type": "point", "position": [0, 0, 20], "intensity": 400})
+    both = run(load_scene(write_scene(tmp_path, scene_dict, "both.json")), "cpu",
+               spp=64).film.image()
+    lamp = albedo / np.pi * 400 / 400        # a/pi I cos / d^2 at the centre (cos ~ 1)
+    assert np.allclose(both.mean(), want + lamp, rtol=0.02)
+    for bad, words in (({"type": "directional"}, "direction"),
+                       ({"type": "directional", "direction": [0, 0, 0]}, "nonzero"),
+                       ({"type": "directional", "direction": [0, 0, -1], "position": [0, 0, 1]},
+                        "position")):
+        scene_dict["lights"] = [bad]
+        with pytest.raises(SceneError, match=words):
+            load_scene(write_scene(tmp_path, scene_dict, "bad.json"))
 
 
 def test_nonfinite_samples_are_counted(tmp_path):

@@ -103,6 +103,15 @@ class PointLight:
 
 
 @dataclass
+class DirectionalLight:
+    """Light from infinitely far away along ``direction`` (unit; where it travels),
+    ``irradiance`` (W m^-2) on a surface facing it; compiled as a far point light
+    (scene.compile.place_suns)."""
+    direction: tuple
+    irradiance: tuple
+
+
+@dataclass
 class EnvironmentMap:
     path: Optional[str]        # None: the file is missing and defaults were asked for
     intensity: float = 1.0
@@ -122,6 +131,7 @@ class SceneDescription:
     environment: object = None   # constant radiance rgb tuple, EnvironmentMap, or None
     exposure: float = 1.0        # thesis folders: linear scale of the image
     warnings: list = field(default_factory=list)
+    directional_lights: list = field(default_factory=list)
 
 
 # ---------------------------------------------------------------------------------------
@@ -392,8 +402,10 @@ def _describe(data, path, base=None):
         if o.name in names:
             raise SceneError(f"duplicate object name {o.name!r}", path, f"{o.pointer}/name")
         names.add(o.name)
-    lights = [_point_light(Node(v, f"/lights/{i}", path))
-              for i, v in enumerate(root.items("lights"))]
+    every_light = [_light(Node(v, f"/lights/{i}", path))
+                   for i, v in enumerate(root.items("lights"))]
+    lights = [li for li in every_light if isinstance(li, PointLight)]
+    suns = [li for li in every_light if isinstance(li, DirectionalLight)]
     for i, v in enumerate(root.items("pointLights")):   # thesis alias
         n = Node(v, f"/pointLights/{i}", path)
         pos = _coordinate(n, "position", (0.0, 0.0, 0.0))
@@ -408,7 +420,8 @@ def _describe(data, path, base=None):
             raise root.error("give 'environment' or 'hdri', not both", "hdri")
         environment = _environment(root.node("hdri"), base, thesis=True)
     root.finish()
-    return SceneDescription(path, camera, render, materials, objects, lights, environment)
+    return SceneDescription(path, camera, render, materials, objects, lights, environment,
+                            directional_lights=suns)
 
 
 def _camera(n, sensor_default=0.036):
@@ -727,8 +740,20 @@ def _transform(n):
     return m
 
 
-def _point_light(n):
-    n.string("type", "point", choices=("point",))
+def _light(n):
+    kind = n.string("type", "point", choices=("point", "directional"))
+    if kind == "directional":
+        if not n.has("direction"):
+            raise n.error("missing required key 'direction'")
+        d = np.asarray(n.vector("direction"), np.float64)
+        length = float(np.linalg.norm(d))
+        if not (np.isfinite(length) and length > 0):
+            raise n.error("the direction must be a nonzero vector", "direction")
+        light = DirectionalLight(tuple((d / length).tolist()),
+                                 n.color("irradiance", (1.0, 1.0, 1.0),
+                                         hi=limits.MAX_RADIANCE))
+        n.finish()
+        return light
     if not n.has("position"):
         raise n.error("missing required key 'position'")
     light = PointLight(_coordinate(n, "position", None),

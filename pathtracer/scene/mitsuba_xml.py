@@ -673,6 +673,19 @@ def _emitter(r, el, out):
         intensity = r.get(p, "intensity", "color", [1.0, 1.0, 1.0])
         out.setdefault("lights", []).append({"type": "point", "position": pos,
                                              "intensity": intensity})
+    elif kind == "directional":
+        # it radiates along +Z of to_world, or along `direction`
+        if "direction" in p:
+            if "to_world" in p:
+                raise r.error("directional emitter: give 'direction' or 'to_world', not both",
+                              el)
+            d = r.get(p, "direction", "point")
+        else:
+            m = r.transform(p["to_world"][1]) if "to_world" in p else np.eye(4)
+            d = (m[:3, :3] @ np.array([0.0, 0.0, 1.0])).tolist()
+        out.setdefault("lights", []).append({
+            "type": "directional", "direction": list(d),
+            "irradiance": r.get(p, "irradiance", "color", [1.0, 1.0, 1.0])})
     elif kind == "constant":
         if "environment" in out:
             raise r.error("more than one environment emitter", el)
@@ -699,5 +712,6 @@ def _emitter(r, el, out):
     elif kind == "area":
         raise r.error("an area emitter belongs inside a <shape>", el)
     else:
-        raise r.error(f"emitter {kind!r} is not supported (point, constant, envmap, area)",
+        raise r.error(f"emitter {kind!r} is not supported (point, directional, constant, "
+                      "envmap, area)",
                       el)
