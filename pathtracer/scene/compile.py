@@ -761,10 +761,14 @@ def geometry_sphere(tri):
     coordinates), or None without triangles."""
     if not tri.n:
         return None
-    v = tri.tri_v[:tri.n].astype(np.float64)
-    v0 = v[:, TRI_V0:TRI_V0 + 3]
-    corners = np.concatenate([v0, v0 + v[:, TRI_E1:TRI_E1 + 3], v0 + v[:, TRI_E2:TRI_E2 + 3]])
-    lo, hi = corners.min(0), corners.max(0)
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for start in range(0, tri.n, 1 << 20):        # (a few MB of temporaries at a time)
+        v = tri.tri_v[start:min(tri.n, start + (1 << 20))]
+        v0 = v[:, TRI_V0:TRI_V0 + 3]
+        for corner in (v0, v0 + v[:, TRI_E1:TRI_E1 + 3], v0 + v[:, TRI_E2:TRI_E2 + 3]):
+            lo = np.minimum(lo, corner.min(0))
+            hi = np.maximum(hi, corner.max(0))
     return (lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2
 
 
@@ -815,9 +819,9 @@ def compile_lights(desc, tri, mat, mat_power, shift):
     counts only the power that falls into that sphere (reaching_fraction: a light far away,
     such as a directional light made a point light by place_suns, would otherwise take
     nearly every light sample from the lights that light the scene as much)."""
-    sphere = geometry_sphere(tri)
-    point_list = list(desc.point_lights) + place_suns(
-        getattr(desc, "directional_lights", ()), sphere, shift)
+    suns = getattr(desc, "directional_lights", ())
+    sphere = geometry_sphere(tri) if (desc.point_lights or suns) else None
+    point_list = list(desc.point_lights) + place_suns(suns, sphere, shift)
     weights, refs = [], []
     if tri.n:
         two_sided = np.where(mat[:, M_TWO_SIDED] > 0, 2, 1)
