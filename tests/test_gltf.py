@@ -270,13 +270,43 @@ def test_reaching_fraction_is_the_solid_angle_of_the_geometrys_sphere():
     assert reaching_fraction([3, 0, 0], None) == 1.0
 
 
-def test_spot_light_and_required_extension_are_clear_errors(tmp_path):
+def test_spot_light(tmp_path):
+    """A glTF spot light (along its node's -Z, cone angles in radians, glTF's defaults 0 and
+    pi/4) is the scene format's spot light; its cone is the kernels' (layout PL_CONE_*:
+    glTF's falloff); an unknown light type or bad angles are clear errors."""
+    from pathtracer.kernels import layout as L
     b = Builder()
     b.node(mesh=b.mesh(QUAD_V, QUAD_F))
-    li = b.light({"type": "spot", "spot": {}})
-    b.node(extensions={"KHR_lights_punctual": {"light": li}})
-    with pytest.raises(SceneError, match="spot light.*spot lights are not supported"):
-        read_model(b.save(tmp_path / "spot.glb"))
+    li = b.light({"type": "spot", "intensity": 683 * 2, "spot": {"innerConeAngle": 0.2,
+                                                                  "outerConeAngle": 0.5}})
+    b.node(translation=[0, 0, 3], rotation=look_at_rotation([0, 0, 3], [0, 0, 0]),
+           extensions={"KHR_lights_punctual": {"light": li}})
+    b.node(translation=[0, 0, 4], extensions={"KHR_lights_punctual": {
+        "light": b.light({"type": "spot", "spot": {}})}})
+    scene = pt.load_scene(b.save(tmp_path / "spot.glb"))
+    spot, default = scene.data["lights"]
+    assert spot["type"] == "spot" and np.allclose(spot["direction"], [0, 0, -1])
+    assert spot["innerAngle"] == pytest.approx(math.degrees(0.2))
+    assert spot["outerAngle"] == pytest.approx(math.degrees(0.5))
+    assert np.allclose(spot["intensity"], 2.0)
+    assert default["innerAngle"] == 0 and default["outerAngle"] == pytest.approx(45)
+    assert np.allclose(default["direction"], [0, 0, -1])       # a node without rotation
+    row = scene.compiled.arrays.point_lights[0].astype(np.float64)
+    scale = 1 / (math.cos(0.2) - math.cos(0.5))
+    assert row[L.PL_CONE_SCALE] == pytest.approx(scale, rel=1e-6)
+    assert row[L.PL_CONE_OFFSET] == pytest.approx(-math.cos(0.5) * scale, rel=1e-6)
+    for k, (bad, words) in enumerate((
+            ({"type": "area"}, "point, spot or directional"),
+            ({"type": "spot", "spot": {"innerConeAngle": 0.5, "outerConeAngle": 0.5}},
+             "cone angles"))):
+        b = Builder()
+        b.node(mesh=b.mesh(QUAD_V, QUAD_F))
+        b.node(extensions={"KHR_lights_punctual": {"light": b.light(bad)}})
+        with pytest.raises(SceneError, match=words):
+            read_model(b.save(tmp_path / f"bad{k}.glb"))
+
+
+def test_required_extension_is_a_clear_error(tmp_path):
     b = Builder()
     b.node(mesh=b.mesh(QUAD_V, QUAD_F))
     b.doc["extensionsRequired"] = ["KHR_draco_mesh_compression"]

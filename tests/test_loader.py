@@ -61,7 +61,7 @@ def error_of(tmp_path, scene, raw=None):
      "/environment/misCompensation", "true or false"),
     (lambda s: s.update(environment={"color": 1, "misCompensation": False}),
      "/environment/misCompensation", "unknown key"),
-    (lambda s: s.update(lights=[{"type": "spot", "position": [0, 0, 0]}]), "/lights/0/type", "one of"),
+    (lambda s: s.update(lights=[{"type": "area", "position": [0, 0, 0]}]), "/lights/0/type", "one of"),
     (lambda s: s["objects"][0].update(transform={"scale": 0}), "/objects/0/transform", "singular"),
     (lambda s: s.update(extra=1), "/extra", "unknown key"),
     (lambda s: s.pop("camera"), "/", "camera"),
@@ -144,7 +144,8 @@ def test_thesis_aliases_and_vector_objects(tmp_path):
     s = load_scene(write_scene(tmp_path, scene))
     assert (s.width, s.height) == (12, 6)
     assert s.features.point_lights and s.features.environment
-    assert np.allclose(s.arrays.point_lights[0], [0, 3, 0, 1, 2, 3])
+    assert np.allclose(s.arrays.point_lights[0, L.PL_POSITION:L.PL_INTENSITY + 3],
+                       [0, 3, 0, 1, 2, 3])
     assert np.allclose(s.arrays.env, [0.1, 0.2, 0.3])
 
 

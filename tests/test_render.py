@@ -142,6 +142,54 @@ def test_smooth_normals_render_finite(tmp_path):
     assert img[:, :12].max() == 0 and flat[:, :12].max() == 0
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_spot_light_irradiance(tmp_path, backend):
+    """A spot light of intensity I at height h pointing down at a Lambertian plane:
+    L = a/pi I cos/d^2 t^2, t = clamp((cos - cos_outer) / (cos_inner - cos_outer), 0, 1)
+    (glTF's falloff): full inside the inner cone, dark outside the outer one. As
+    test_point_light_irradiance: the expectation averaged over each pixel, a z-test."""
+    h, intensity, albedo = 1.0, 2.0, 0.8
+    inner, outer = 10.0, 25.0
+    s = 50.0
+    scene_dict = {
+        "camera": {"resolution": [16, 16], "position": [0, 0, 3], "lookAt": [0, 0, 0],
+                   "up": [0, 1, 0], "fov": 40},
+        "render": {"maxBounces": 1},
+        "materials": [{"name": "m", "type": "diffuse", "albedo": albedo}],
+        "objects": [{"name": "plane", "vertices": [[-s, -s, 0], [s, -s, 0], [s, s, 0],
+                                                   [-s, s, 0]],
+                     "faces": [[0, 1, 2], [0, 2, 3]], "material": "m"}],
+        "lights": [{"type": "spot", "position": [0, 0, h], "intensity": intensity,
+                    "direction": [0, 0, -1], "innerAngle": inner, "outerAngle": outer}],
+    }
+    scene = load_scene(write_scene(tmp_path, scene_dict))
+    spp = 256
+    img = run(scene, backend, spp=spp).film.image()
+    t = np.tan(np.radians(20.0))
+    sub = (np.arange(16 * 32) + 0.5) / (16 * 32) * 2 - 1
+    x = sub[None, :] * t * 3
+    y = -sub[:, None] * t * 3
+    d2 = x * x + y * y + h * h
+    cos = h / np.sqrt(d2)
+    cone = np.clip((cos - np.cos(np.radians(outer))) /
+                   (np.cos(np.radians(inner)) - np.cos(np.radians(outer))), 0, 1) ** 2
+    fine = albedo / np.pi * intensity * cos / d2 * cone
+    blocks = fine.reshape(16, 32, 16, 32)
+    expected = blocks.mean(axis=(1, 3))
+    se = blocks.std(axis=(1, 3)) / np.sqrt(spp)
+    z = (img[..., 0] - expected) / (se + 1e-6 * expected.max())
+    assert np.abs(z).max() < 5.5, np.abs(z).max()
+    assert (img[expected == 0] == 0).all()            # outside the cone: dark
+    assert img[..., 0].max() == pytest.approx(albedo / np.pi * intensity, rel=0.02)
+    for bad, words in (({"direction": [0, 0, -1], "outerAngle": 95}, "outerAngle"),
+                       ({"direction": [0, 0, -1], "innerAngle": 30, "outerAngle": 20},
+                        "innerAngle"),
+                       ({}, "direction")):
+        scene_dict["lights"] = [dict({"type": "spot", "position": [0, 0, 1]}, **bad)]
+        with pytest.raises(SceneError, match=words):
+            load_scene(write_scene(tmp_path, scene_dict, "bad.json"))
+
+
 def test_directional_light_irradiance(tmp_path):
     """A directional light of irradiance E at 60 degrees from a Lambertian plane's normal:
     L = a/pi E cos 60 everywhere (compiled as a point light 1,000 radii of the geometry

@@ -29,12 +29,13 @@ from typing import NamedTuple
 from .constants import INF, ONE, ONE_MINUS_EPS, SHADOW_SHORTEN, ZERO
 from .device import device, step_marker
 from .envmap import env_eval_uv, env_lookup, env_sample_uv
-from .layout import ENV_P_SELECT, PL_INTENSITY, PL_POSITION, point_light_index, specialise
+from .layout import (ENV_P_SELECT, PL_AXIS, PL_CONE_OFFSET, PL_CONE_SCALE, PL_INTENSITY,
+                     PL_POSITION, point_light_index, specialise)
 from .lights import direction_to, sample_discrete, sample_triangle_point
 from .materials import emits
 from .surface import make_surface
 from .textures import NO_FOOTPRINT
-from .vec import dot, load3
+from .vec import dot, load3, scale
 from .warps import power_heuristic, square_to_triangle
 
 NO_RADIANCE = (ZERO, ZERO, ZERO)
@@ -105,10 +106,14 @@ def make_emitters(features, target="cpu"):
     def sample_point_light(point_lights, pmf, ref, p):
         pl = point_light_index(ref)
         wi, dist = direction_to(p, load3(point_lights, pl, PL_POSITION))
-        if not (dist > ZERO):
+        # a spot light's cone (layout PL_CONE_*; 1 for a point light)
+        t = min(max(-dot(wi, load3(point_lights, pl, PL_AXIS)) *
+                    point_lights[pl, PL_CONE_SCALE] + point_lights[pl, PL_CONE_OFFSET], ZERO),
+                ONE)
+        if not (dist > ZERO and t > ZERO):
             return wi, ZERO, NO_RADIANCE, ZERO, True, -1
         # a delta light: radiance / pdf_light = intensity / (pmf * dist^2)
-        return (wi, dist * SHADOW_SHORTEN, load3(point_lights, pl, PL_INTENSITY),
+        return (wi, dist * SHADOW_SHORTEN, scale(load3(point_lights, pl, PL_INTENSITY), t * t),
                 pmf * dist * dist, True, -1)
 
     @step

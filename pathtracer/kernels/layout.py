@@ -163,10 +163,16 @@ PARAM_BY_KEY = {p.key: p for p in MATERIAL_PARAMS}
 DEFAULT_ETA = 1.5
 
 # ---- Lights ------------------------------------------------------------------------------------
-# point_lights, float32 (P, PL_WIDTH)
+# point_lights, float32 (P, PL_WIDTH): point and spot lights. A spot light's intensity is
+# scaled by t^2, t = clamp(cos * PL_CONE_SCALE + PL_CONE_OFFSET, 0, 1), cos the cosine between
+# PL_AXIS (where it points) and the direction to the lit point (glTF KHR_lights_punctual's
+# falloff); a point light has scale 0 and offset 1.
 PL_POSITION = 0
 PL_INTENSITY = 3
-PL_WIDTH = 6
+PL_AXIS = 6
+PL_CONE_SCALE = 9
+PL_CONE_OFFSET = 10
+PL_WIDTH = 11
 # light_ref[k]: triangle index of light k, or point_light_ref(p) for point light p
 # env_info, float32 (ENV_INFO_SIZE,)
 ENV_COS_ROT = 0       # cos and sin of the map's rotation about +Y

@@ -831,7 +831,10 @@ def compile_lights(desc, tri, mat, mat_power, shift):
         weights.extend(tri_power[emissive])
         refs.extend(emissive.tolist())
     for i, light in enumerate(point_list):
-        p = 4 * math.pi * float(np.mean(light.intensity)) * reaching_fraction(
+        # a spot light's power: about 2 pi (1 - cos of its cone's mean half-angle) I
+        solid = 4 * math.pi if light.axis is None else 2 * math.pi * (1 - math.cos(
+            math.radians((light.inner_angle + light.outer_angle) / 2)))
+        p = solid * float(np.mean(light.intensity)) * reaching_fraction(
             np.asarray(light.position, np.float64) - shift, sphere)
         if p > 0:
             weights.append(p)
@@ -847,6 +850,16 @@ def compile_lights(desc, tri, mat, mat_power, shift):
     for i, light in enumerate(point_list):
         point_lights[i, PL_POSITION:PL_POSITION + 3] = np.asarray(light.position) - shift
         point_lights[i, PL_INTENSITY:PL_INTENSITY + 3] = light.intensity
+        point_lights[i, L.PL_CONE_OFFSET] = 1.0          # a point light: no cone
+        if light.axis is not None:
+            # glTF KHR_lights_punctual's spot falloff: t = clamp(cos * scale + offset, 0, 1)
+            # squared, t = 0 at the outer angle and 1 inside the inner one
+            cos_in = math.cos(math.radians(light.inner_angle))
+            cos_out = math.cos(math.radians(light.outer_angle))
+            cone_scale = 1.0 / max(1e-3, cos_in - cos_out)
+            point_lights[i, L.PL_AXIS:L.PL_AXIS + 3] = light.axis
+            point_lights[i, L.PL_CONE_SCALE] = cone_scale
+            point_lights[i, L.PL_CONE_OFFSET] = -cos_out * cone_scale
     return Lights(light_cdf, light_ref, refs, point_lights, any(r >= 0 for r in refs),
                   any(r < 0 for r in refs))
 

@@ -599,11 +599,9 @@ class GltfModel:
         if not isinstance(light, dict):
             raise self.error("a light must be an object", self._where)
         kind = light.get("type")
-        if kind not in ("point", "directional"):
-            raise self.error(f"a {kind} light: pt-render renders point lights, and directional "
-                             "ones as far point lights (spot lights are not supported; remove "
-                             "it or make it a point light)",
-                             f"/extensions/KHR_lights_punctual/lights/{i}")
+        if kind not in ("point", "spot", "directional"):
+            raise self.error(f"a {kind!r} light: KHR_lights_punctual lights are point, spot or "
+                             "directional", f"/extensions/KHR_lights_punctual/lights/{i}")
         color = [float(c) for c in light.get("color", [1, 1, 1])]
         intensity = float(light.get("intensity", 1.0))
         if kind == "directional":
@@ -620,8 +618,23 @@ class GltfModel:
                       "scene's radius away (the same irradiance at the scene's centre, "
                       "within 0.2 % across it)")
             return
-        self.lights.append({"type": "point", "position": world[:3, 3].tolist(),
-                            "intensity": [c * intensity / LUMENS_PER_WATT for c in color]})
+        out = {"type": "point", "position": world[:3, 3].tolist(),
+               "intensity": [c * intensity / LUMENS_PER_WATT for c in color]}
+        if kind == "spot":
+            # it points along its node's -Z; the cone's angles in radians (glTF's defaults)
+            spot = light.get("spot") or {}
+            d = world[:3, :3] @ np.array([0.0, 0.0, -1.0])
+            if not np.isfinite(d).all() or np.linalg.norm(d) == 0:
+                raise self.error("a spot light's node transform is degenerate", where)
+            outer = float(spot.get("outerConeAngle", math.pi / 4))
+            inner = float(spot.get("innerConeAngle", 0.0))
+            if not (0 <= inner < outer <= math.pi / 2):
+                raise self.error("a spot light's cone angles must satisfy 0 <= innerConeAngle "
+                                 f"< outerConeAngle <= pi/2, got {inner:g} and {outer:g}",
+                                 f"/extensions/KHR_lights_punctual/lights/{i}/spot")
+            out.update(type="spot", direction=(d / np.linalg.norm(d)).tolist(),
+                       innerAngle=math.degrees(inner), outerAngle=math.degrees(outer))
+        self.lights.append(out)
 
 
 def _info(d):

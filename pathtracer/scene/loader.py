@@ -100,6 +100,11 @@ class Object:
 class PointLight:
     position: tuple
     intensity: tuple
+    # a spot light: where it points (unit), and its cone's inner and outer half-angles
+    # (degrees); intensity falls off as glTF's KHR_lights_punctual spot (scene.compile)
+    axis: Optional[tuple] = None
+    inner_angle: float = 0.0
+    outer_angle: float = 45.0
 
 
 @dataclass
@@ -741,7 +746,7 @@ def _transform(n):
 
 
 def _light(n):
-    kind = n.string("type", "point", choices=("point", "directional"))
+    kind = n.string("type", "point", choices=("point", "spot", "directional"))
     if kind == "directional":
         if not n.has("direction"):
             raise n.error("missing required key 'direction'")
@@ -758,6 +763,21 @@ def _light(n):
         raise n.error("missing required key 'position'")
     light = PointLight(_coordinate(n, "position", None),
                        n.color("intensity", (1.0, 1.0, 1.0), hi=limits.MAX_RADIANCE))
+    if kind == "spot":
+        if not n.has("direction"):
+            raise n.error("missing required key 'direction'")
+        d = np.asarray(n.vector("direction"), np.float64)
+        length = float(np.linalg.norm(d))
+        if not (np.isfinite(length) and length > 0):
+            raise n.error("the direction must be a nonzero vector", "direction")
+        outer = n.number("outerAngle", 45.0)
+        inner = n.number("innerAngle", 0.0)
+        if not 0 < outer <= 90:
+            raise n.error(f"outerAngle must be in (0, 90] degrees, got {outer:g}", "outerAngle")
+        if not 0 <= inner < outer:
+            raise n.error(f"innerAngle must be in [0, outerAngle), got {inner:g}", "innerAngle")
+        light.axis = tuple((d / length).tolist())
+        light.inner_angle, light.outer_angle = float(inner), float(outer)
     n.finish()
     return light
 
