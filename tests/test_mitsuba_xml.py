@@ -135,6 +135,32 @@ def test_directional_emitter(tmp_path):
                            '<rotate x="1" angle="90"/></transform></emitter>'))
 
 
+def test_spot_emitter(tmp_path):
+    """Mitsuba's spot emitter (at to_world's origin, pointing along its +Z; cutoff_angle
+    default 20, beam_width 3/4 of it) is the scene format's spot light, with a warning that
+    the falloff between the two angles is glTF's curve."""
+    head = SENSOR + '<shape type="rectangle"><bsdf type="diffuse"/></shape>\n'
+    d, warnings = convert_file(write(tmp_path, head + '<emitter type="spot"><transform '
+                                     'name="to_world"><lookat origin="0, 2, 0" target="0, 0, '
+                                     '0" up="0, 0, 1"/></transform><rgb name="intensity" '
+                                     'value="4"/></emitter>'))
+    light, = d["lights"]
+    assert light["type"] == "spot" and np.allclose(light["position"], [0, 2, 0])
+    assert np.allclose(light["direction"], [0, -1, 0], atol=1e-12)
+    assert light["intensity"] == [4.0] * 3
+    assert light["outerAngle"] == 20 and light["innerAngle"] == 15
+    assert any("spot emitter" in w for w in warnings)
+    scene = pt.load_scene(write(tmp_path, head + '<emitter type="spot"><float '
+                                'name="cutoff_angle" value="30"/><float name="beam_width" '
+                                'value="10"/></emitter>', "s2.xml"))
+    light, = scene.data["lights"]
+    assert (light["innerAngle"], light["outerAngle"]) == (10, 30)
+    with pytest.raises(pt.SceneError, match="beam_width"):
+        convert_file(write(tmp_path, head + '<emitter type="spot"><float name="cutoff_angle" '
+                           'value="10"/><float name="beam_width" value="12"/></emitter>',
+                           "s3.xml"))
+
+
 def test_area_emitter_gets_its_own_material(tmp_path):
     body = SENSOR + """<bsdf type="diffuse" id="white"><rgb name="reflectance" value="0.8"/></bsdf>
 <shape type="rectangle" id="lamp"><ref id="white"/><emitter type="area">
@@ -158,7 +184,7 @@ def test_area_emitter_gets_its_own_material(tmp_path):
      '</shape>', "complex index of refraction"),
     ('<medium type="homogeneous"/>', "<medium> is not supported"),
     ('<shape type="obj"><string name="filename" value="$mesh"/></shape>', "$mesh: no <default"),
-    ('<emitter type="spot"/>', "emitter 'spot' is not supported"),
+    ('<emitter type="projector"/>', "emitter 'projector' is not supported"),
     ('<integrator type="bdpt"/>', "integrator 'bdpt' is not supported"),
 ])
 def test_unsupported_elements_are_named(tmp_path, body, message):

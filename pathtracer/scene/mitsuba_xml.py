@@ -686,6 +686,25 @@ def _emitter(r, el, out):
         out.setdefault("lights", []).append({
             "type": "directional", "direction": list(d),
             "irradiance": r.get(p, "irradiance", "color", [1.0, 1.0, 1.0])})
+    elif kind == "spot":
+        # it points along +Z of to_world, from its origin; Mitsuba's falloff is linear in the
+        # angle from beam_width (full) to cutoff_angle (dark), ours glTF's (quadratic in the
+        # cosine between the same angles): close, not equal, so a warning says so
+        m = r.transform(p["to_world"][1]) if "to_world" in p else np.eye(4)
+        cutoff = r.get(p, "cutoff_angle", "float", 20.0)
+        beam = r.get(p, "beam_width", "float", cutoff * 3 / 4)
+        if not (0 < cutoff <= 90 and 0 <= beam < cutoff):
+            raise r.error(f"spot emitter: cutoff_angle {cutoff:g} and beam_width {beam:g} "
+                          "(degrees) must satisfy 0 <= beam_width < cutoff_angle <= 90", el)
+        if "texture" in p:
+            raise r.error("spot emitter: a texture is not supported", el)
+        out.setdefault("lights", []).append({
+            "type": "spot", "position": m[:3, 3].tolist(),
+            "direction": (m[:3, :3] @ np.array([0.0, 0.0, 1.0])).tolist(),
+            "intensity": r.get(p, "intensity", "color", [1.0, 1.0, 1.0]),
+            "innerAngle": float(beam), "outerAngle": float(cutoff)})
+        r.warn("spot emitter: its falloff between beam_width and cutoff_angle follows glTF's "
+               "curve (quadratic in the cosine), not Mitsuba's (linear in the angle)", el)
     elif kind == "constant":
         if "environment" in out:
             raise r.error("more than one environment emitter", el)
@@ -712,6 +731,6 @@ def _emitter(r, el, out):
     elif kind == "area":
         raise r.error("an area emitter belongs inside a <shape>", el)
     else:
-        raise r.error(f"emitter {kind!r} is not supported (point, directional, constant, "
-                      "envmap, area)",
+        raise r.error(f"emitter {kind!r} is not supported (point, spot, directional, "
+                      "constant, envmap, area)",
                       el)
