@@ -33,7 +33,8 @@ from ..kernels.layout import (CAM_CONE, CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_
                               ENV_SIN_ROT, FILTER_BILINEAR, FILTER_NEAREST, FILTER_TRILINEAR,
                               M_ALBEDO, M_ANISOTROPIC, M_EMISSION, M_ETA, M_TWO_SIDED, M_TYPE,
                               MAT_DIFFUSE, MAT_PRINCIPLED, MAT_WIDTH, MATERIAL_PARAMS, N_SLOTS,
-                              NO_TEXTURE, PL_INTENSITY, PL_POSITION, PL_WIDTH, T_ALBEDO, T_EMISSION,
+                              NO_TEXTURE, PL_AXIS, PL_CONE_OFFSET, PL_CONE_SCALE, PL_INTENSITY,
+                              PL_POSITION, PL_WIDTH, T_ALBEDO, T_EMISSION,
                               T_NORMAL, TEX_F_WIDTH, TEX_FILTER, TEX_WRAP, WRAP_CLAMP, WRAP_MIRROR,
                               WRAP_REPEAT, TEX_FIRST, TEX_HEIGHT, TEX_INT_WIDTH, TEX_LEVELS,
                               TEXEL_WIDTH,
@@ -850,16 +851,16 @@ def compile_lights(desc, tri, mat, mat_power, shift):
     for i, light in enumerate(point_list):
         point_lights[i, PL_POSITION:PL_POSITION + 3] = np.asarray(light.position) - shift
         point_lights[i, PL_INTENSITY:PL_INTENSITY + 3] = light.intensity
-        point_lights[i, L.PL_CONE_OFFSET] = 1.0          # a point light: no cone
+        point_lights[i, PL_CONE_OFFSET] = 1.0          # a point light: no cone
         if light.axis is not None:
             # glTF KHR_lights_punctual's spot falloff: t = clamp(cos * scale + offset, 0, 1)
             # squared, t = 0 at the outer angle and 1 inside the inner one
             cos_in = math.cos(math.radians(light.inner_angle))
             cos_out = math.cos(math.radians(light.outer_angle))
             cone_scale = 1.0 / max(1e-3, cos_in - cos_out)
-            point_lights[i, L.PL_AXIS:L.PL_AXIS + 3] = light.axis
-            point_lights[i, L.PL_CONE_SCALE] = cone_scale
-            point_lights[i, L.PL_CONE_OFFSET] = -cos_out * cone_scale
+            point_lights[i, PL_AXIS:PL_AXIS + 3] = light.axis
+            point_lights[i, PL_CONE_SCALE] = cone_scale
+            point_lights[i, PL_CONE_OFFSET] = -cos_out * cone_scale
     return Lights(light_cdf, light_ref, refs, point_lights, any(r >= 0 for r in refs),
                   any(r < 0 for r in refs))
 

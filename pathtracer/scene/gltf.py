@@ -587,6 +587,13 @@ class GltfModel:
                "aspectRatio": float(p.aspectRatio) if p.aspectRatio else None}
         self.cameras.append((name, i, cam))
 
+    def _node_direction(self, world, kind, where):
+        """The unit direction a spot or directional light shines in: its node's -Z."""
+        d = world[:3, :3] @ np.array([0.0, 0.0, -1.0])
+        if not np.isfinite(d).all() or np.linalg.norm(d) == 0:
+            raise self.error(f"a {kind} light's node transform is degenerate", where)
+        return (d / np.linalg.norm(d)).tolist()
+
     def _light(self, ref, world, where):
         lights = ((self.gltf.extensions or {}).get("KHR_lights_punctual") or {}).get(
             "lights") or []
@@ -605,13 +612,10 @@ class GltfModel:
         color = [float(c) for c in light.get("color", [1, 1, 1])]
         intensity = float(light.get("intensity", 1.0))
         if kind == "directional":
-            # it shines along its node's -Z; the scene format's directional light, which
-            # scene.compile renders as a far point light (place_suns)
-            d = world[:3, :3] @ np.array([0.0, 0.0, -1.0])
-            if not np.isfinite(d).all() or np.linalg.norm(d) == 0:
-                raise self.error("a directional light's node transform is degenerate", where)
+            # the scene format's directional light, which scene.compile renders as a far
+            # point light (place_suns)
             self.lights.append({"type": "directional",
-                                "direction": (d / np.linalg.norm(d)).tolist(),
+                                "direction": self._node_direction(world, kind, where),
                                 "irradiance": [c * intensity / LUMENS_PER_WATT
                                                for c in color]})
             self.warn(f"directional light {i}: rendered as a point light 1000 times the "
@@ -621,18 +625,15 @@ class GltfModel:
         out = {"type": "point", "position": world[:3, 3].tolist(),
                "intensity": [c * intensity / LUMENS_PER_WATT for c in color]}
         if kind == "spot":
-            # it points along its node's -Z; the cone's angles in radians (glTF's defaults)
+            # the cone's angles in radians (glTF's defaults)
             spot = light.get("spot") or {}
-            d = world[:3, :3] @ np.array([0.0, 0.0, -1.0])
-            if not np.isfinite(d).all() or np.linalg.norm(d) == 0:
-                raise self.error("a spot light's node transform is degenerate", where)
             outer = float(spot.get("outerConeAngle", math.pi / 4))
             inner = float(spot.get("innerConeAngle", 0.0))
             if not (0 <= inner < outer <= math.pi / 2):
                 raise self.error("a spot light's cone angles must satisfy 0 <= innerConeAngle "
                                  f"< outerConeAngle <= pi/2, got {inner:g} and {outer:g}",
                                  f"/extensions/KHR_lights_punctual/lights/{i}/spot")
-            out.update(type="spot", direction=(d / np.linalg.norm(d)).tolist(),
+            out.update(type="spot", direction=self._node_direction(world, kind, where),
                        innerAngle=math.degrees(inner), outerAngle=math.degrees(outer))
         self.lights.append(out)
 

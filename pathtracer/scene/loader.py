@@ -745,18 +745,22 @@ def _transform(n):
     return m
 
 
+def _direction(n):
+    """The required key 'direction' of a spot or directional light, as a unit vector."""
+    if not n.has("direction"):
+        raise n.error("missing required key 'direction'")
+    d = np.asarray(n.vector("direction"), np.float64)
+    length = float(np.linalg.norm(d))
+    if not (np.isfinite(length) and length > 0):
+        raise n.error("the direction must be a nonzero vector", "direction")
+    return tuple((d / length).tolist())
+
+
 def _light(n):
     kind = n.string("type", "point", choices=("point", "spot", "directional"))
     if kind == "directional":
-        if not n.has("direction"):
-            raise n.error("missing required key 'direction'")
-        d = np.asarray(n.vector("direction"), np.float64)
-        length = float(np.linalg.norm(d))
-        if not (np.isfinite(length) and length > 0):
-            raise n.error("the direction must be a nonzero vector", "direction")
-        light = DirectionalLight(tuple((d / length).tolist()),
-                                 n.color("irradiance", (1.0, 1.0, 1.0),
-                                         hi=limits.MAX_RADIANCE))
+        light = DirectionalLight(_direction(n), n.color("irradiance", (1.0, 1.0, 1.0),
+                                                        hi=limits.MAX_RADIANCE))
         n.finish()
         return light
     if not n.has("position"):
@@ -764,19 +768,13 @@ def _light(n):
     light = PointLight(_coordinate(n, "position", None),
                        n.color("intensity", (1.0, 1.0, 1.0), hi=limits.MAX_RADIANCE))
     if kind == "spot":
-        if not n.has("direction"):
-            raise n.error("missing required key 'direction'")
-        d = np.asarray(n.vector("direction"), np.float64)
-        length = float(np.linalg.norm(d))
-        if not (np.isfinite(length) and length > 0):
-            raise n.error("the direction must be a nonzero vector", "direction")
+        light.axis = _direction(n)
         outer = n.number("outerAngle", 45.0)
         inner = n.number("innerAngle", 0.0)
         if not 0 < outer <= 90:
             raise n.error(f"outerAngle must be in (0, 90] degrees, got {outer:g}", "outerAngle")
         if not 0 <= inner < outer:
             raise n.error(f"innerAngle must be in [0, outerAngle), got {inner:g}", "innerAngle")
-        light.axis = tuple((d / length).tolist())
         light.inner_angle, light.outer_angle = float(inner), float(outer)
     n.finish()
     return light
