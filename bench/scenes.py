@@ -88,6 +88,44 @@ def sun(res):
     }
 
 
+def lamps(res, light_sampler="auto"):
+    """The Stanford bunny (principled, smooth) on a diffuse floor lit by many small lights:
+    an 8 x 8 grid of lamps (one-sided quads facing down, 128 triangles in 64 colours and
+    powers) spread over a floor far wider than the view, a small emissive sphere beside
+    the bunny, a spot light from above and a point light: most lights are far from most
+    shading points, the case the light tree (render.lightSampler) is for."""
+    bunny = os.path.join(MODELS, "stanford_bunny.obj")
+    rng = np.random.default_rng(7)
+    materials = [{"name": "floor", "type": "diffuse", "albedo": 0.6},
+                 {"name": "bunny", "albedo": [0.75, 0.45, 0.25], "roughness": 0.35},
+                 {"name": "bulb", "type": "diffuse", "albedo": 0.0,
+                  "emission": [40.0, 30.0, 20.0]}]
+    objects = [_ground("floor"),
+               {"name": "bunny", "file": bunny, "material": "bunny", "smooth": True,
+                "transform": {"matrix": fit_matrix(bunny, 1.0, floor=0.0)}},
+               {"name": "bulb", "file": os.path.join(SCENES_DIR, "assets", "sphere.obj"),
+                "material": "bulb", "transform": {"scale": 0.05, "translate": [0.7, 0.3, 0.3]}}]
+    for i in range(8):
+        for j in range(8):
+            x, z, s = -7 + 2 * i, -7 + 2 * j, 0.12
+            name = f"lamp{i}{j}"
+            materials.append({"name": name, "type": "diffuse", "albedo": 0.0,
+                              "emission": (rng.random(3) * 6 + 1).round(2).tolist()})
+            objects.append({"name": name, "material": name,
+                            "vertices": [[x - s, 1.5, z - s], [x + s, 1.5, z - s],
+                                         [x + s, 1.5, z + s], [x - s, 1.5, z + s]],
+                            "faces": [[0, 1, 2], [0, 2, 3]]})
+    return {
+        "camera": {"resolution": list(res), "position": [0.4, 1.0, 3.2],
+                   "lookAt": [0, 0.4, 0], "fov": 40},
+        "render": {"maxBounces": 8, "lightSampler": light_sampler},
+        "materials": materials, "objects": objects,
+        "lights": [{"type": "spot", "position": [0, 2.5, 0], "intensity": 4,
+                    "direction": [0, -1, 0], "innerAngle": 10, "outerAngle": 25},
+                   {"type": "point", "position": [-1.5, 1.2, 1.0], "intensity": 0.5}],
+    }
+
+
 # name: (description builder or scene file, resolution); the reference of every scene but the
 # Cornell box (whose reference is Mitsuba's) is ours at high spp: `python -m bench.references`
 CONVERGENCE = {

@@ -31,7 +31,8 @@ from .device import device, step_marker
 from .envmap import env_eval_uv, env_lookup, env_sample_uv
 from .layout import (ENV_P_SELECT, PL_AXIS, PL_CONE_OFFSET, PL_CONE_SCALE, PL_INTENSITY,
                      PL_POSITION, point_light_index, specialise)
-from .lights import direction_to, sample_discrete, sample_triangle_point
+from .lights import (direction_to, light_tree_pmf, sample_discrete, sample_light_tree,
+                     sample_triangle_point)
 from .materials import emits
 from .surface import make_surface
 from .textures import NO_FOOTPRINT
@@ -66,6 +67,7 @@ def make_emitters(features, target="cpu"):
     TRI_LIGHTS = S.tri_lights
     POINT_LIGHTS = S.point_lights
     ANY_LIGHTS = S.any_lights
+    LIGHT_TREE = S.light_tree
     ENV_MAP = S.env_map
     ENVIRONMENT = S.environment
     TEXTURES = S.textures
@@ -83,14 +85,14 @@ def make_emitters(features, target="cpu"):
 
     @step
     def sample_triangle_light(tri_v, tri_mat, tri_uv, tri_light_pdf, mat, mat_tex, tex_data,
-                              tex_int, tex_f, ref, p, u1, u2):
+                              tex_int, tex_f, ref, pmf, p, u1, u2):
         q, nl, _ = sample_triangle_point(tri_v, ref, u1, u2)
         wi, dist = direction_to(p, q)
         cos_l = -dot(nl, wi)
         lm = tri_mat[ref]
         # tri_light_pdf = selection pmf / area: the same density hit_emission uses (0 for
-        # zero-area triangles)
-        pdf_area = tri_light_pdf[ref]
+        # zero-area triangles); with the light tree, pmf is the tree's pick (else 1)
+        pdf_area = tri_light_pdf[ref] * pmf
         if not (dist > ZERO and pdf_area > ZERO and emits(mat, lm, cos_l)):
             return wi, ZERO, NO_RADIANCE, ZERO, False, -1
         lu, lv = ZERO, ZERO
@@ -117,10 +119,12 @@ def make_emitters(features, target="cpu"):
                 pmf * dist * dist, True, -1)
 
     @step
-    def sample_emitter(scene, p, u_sel, u1, u2):
+    def sample_emitter(scene, p, origin, u_sel, u1, u2):
         """One emitter sample seen from p (see the module's docstring): the environment
         with probability env_info[ENV_P_SELECT], otherwise one light chosen in proportion
-        to its power."""
+        to its power, or with the light tree by its importance seen from ``origin`` (where
+        the surface's reflected rays start: hit_emission weighs their hits with the pick's
+        probability there)."""
         if ENV_MAP:
             p_env = scene.env_info[ENV_P_SELECT]
             if u_sel < p_env:
@@ -128,16 +132,23 @@ def make_emitters(features, target="cpu"):
                                           scene.env_info, u1, u2)
             u_sel = min((u_sel - p_env) / (ONE - p_env), ONE_MINUS_EPS)
         if ANY_LIGHTS:
-            k = sample_discrete(scene.light_cdf, u_sel)
+            if LIGHT_TREE:
+                k, pmf = sample_light_tree(scene.lt_node, scene.lt_link, origin, u_sel)
+                if k < 0:
+                    return (ZERO, ZERO, ONE), ZERO, NO_RADIANCE, ZERO, False, -1
+            else:
+                k = sample_discrete(scene.light_cdf, u_sel)
+                pmf = ONE
             ref = scene.light_ref[k]
             if TRI_LIGHTS:
                 if ref >= 0:
                     return sample_triangle_light(
                         scene.tri_v, scene.tri_mat, scene.tri_uv, scene.tri_light_pdf,
                         scene.mat, scene.mat_tex, scene.tex_data, scene.tex_int, scene.tex_f,
-                        ref, p, u1, u2)
+                        ref, pmf, p, u1, u2)
             if POINT_LIGHTS:
-                pmf = scene.light_cdf[k + 1] - scene.light_cdf[k]
+                if not LIGHT_TREE:
+                    pmf = scene.light_cdf[k + 1] - scene.light_cdf[k]
                 if ENV_MAP:
                     pmf *= ONE - scene.env_info[ENV_P_SELECT]
                 return sample_point_light(scene.point_lights, pmf, ref, p)
@@ -154,16 +165,21 @@ def make_emitters(features, target="cpu"):
         return le
 
     @step
-    def hit_emission(mat, mat_tex, tex_data, tex_int, tex_f, tri_light_pdf, tri, m, cos_o, t,
-                     pdf_prev, u, v, fp):
+    def hit_emission(mat, mat_tex, tex_data, tex_int, tex_f, tri_light_pdf, lt_node, lt_link,
+                     tri_light_leaf, tri, m, cos_o, o, t, pdf_prev, u, v, fp):
         """(emitted radiance, MIS weight, emits) of triangle tri (material m) reached at
-        distance t, seen at cosine cos_o with its front normal; fp: the footprint of the
-        texture lookup (see textures.cone_footprint)."""
+        distance t by a ray from o, seen at cosine cos_o with its front normal; fp: the
+        footprint of the texture lookup (see textures.cone_footprint)."""
         if not emits(mat, m, cos_o):
             return NO_RADIANCE, ZERO, False
         pdf_light = ZERO
         if pdf_prev > ZERO:
             pdf_light = tri_light_pdf[tri] * t * t / abs(cos_o)
+            if LIGHT_TREE:
+                # the tree's pick seen from the ray's origin (sample_emitter's origin for
+                # reflected rays; a transmitted ray starts a few ulps away on the other
+                # side, where the importance differs by rounding)
+                pdf_light *= light_tree_pmf(lt_node, lt_link, tri_light_leaf[tri], o)
             # The footprint filters only what the camera sees directly: a MIS-weighted hit
             # sees the unfiltered emission, as the light sample it is weighed against does.
             fp = NO_FOOTPRINT

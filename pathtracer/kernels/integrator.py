@@ -248,7 +248,8 @@ def make_kernels(features, target="cpu"):
         if TRI_LIGHTS:
             le, weight, hit_light = hit_emission(
                 scene.mat, scene.mat_tex, scene.tex_data, scene.tex_int, scene.tex_f,
-                scene.tri_light_pdf, tri, m, dot(ng, wo), t, pdf_prev, tu, tv, fp)
+                scene.tri_light_pdf, scene.lt_node, scene.lt_link, scene.tri_light_leaf,
+                tri, m, dot(ng, wo), o, t, pdf_prev, tu, tv, fp)
             if hit_light:
                 radiance = add(radiance, scale(mul(beta, le), weight))
         if bounce >= max_bounces:
@@ -268,7 +269,7 @@ def make_kernels(features, target="cpu"):
         if NEE:
             dims = open_set(state, dim + D_LIGHT_U)
             wi, t_max, le, pdf_light, is_delta, light_tri = sample_emitter(
-                scene, p, draw(state, dims, dim + D_LIGHT_SELECT),
+                scene, p, origin, draw(state, dims, dim + D_LIGHT_SELECT),
                 draw(state, dims, dim + D_LIGHT_U), draw(state, dims, dim + D_LIGHT_V))
             if pdf_light > ZERO:
                 contribution, traced = direct_light(
@@ -397,7 +398,8 @@ def make_kernels(features, target="cpu"):
             if TRI_LIGHTS:
                 le, weight, hit_light = hit_emission(
                     scene.mat, scene.mat_tex, scene.tex_data, scene.tex_int, scene.tex_f,
-                    scene.tri_light_pdf, tri, m, dot(ng, wo), t, pdf_prev, tu, tv, fp)
+                    scene.tri_light_pdf, scene.lt_node, scene.lt_link, scene.tri_light_leaf,
+                    tri, m, dot(ng, wo), o, t, pdf_prev, tu, tv, fp)
                 if hit_light:
                     radiance = add(radiance, scale(mul(beta, le), weight))
             if bounce >= max_bounces:
@@ -417,7 +419,7 @@ def make_kernels(features, target="cpu"):
             if NEE:
                 dims = open_set(state, dim + D_LIGHT_U)
                 wi, t_max, le, pdf_light, is_delta, light_tri = sample_emitter(
-                    scene, p, draw(state, dims, dim + D_LIGHT_SELECT),
+                    scene, p, origin, draw(state, dims, dim + D_LIGHT_SELECT),
                     draw(state, dims, dim + D_LIGHT_U), draw(state, dims, dim + D_LIGHT_V))
                 if pdf_light > ZERO:
                     contribution, traced = direct_light(
@@ -521,7 +523,8 @@ def make_kernels(features, target="cpu"):
                     # (zero radiance where the surface does not emit towards wo)
                     le, _, _ = hit_emission(
                         scene.mat, scene.mat_tex, scene.tex_data, scene.tex_int, scene.tex_f,
-                        scene.tri_light_pdf, tri, m, dot(ng, wo), t, ZERO, tu, tv, fp)
+                        scene.tri_light_pdf, scene.lt_node, scene.lt_link, scene.tri_light_leaf,
+                        tri, m, dot(ng, wo), o, t, ZERO, tu, tv, fp)
                 ng, ns, tangent, bitangent, wp = shading_frame(
                     scene.tri_n, scene.tri_t, scene.mat_tex, scene.tex_data, scene.tex_int,
                     scene.tex_f, tri, m, b1, b2, e1, ng, wo, params[P_TRANSMISSION] > ZERO,

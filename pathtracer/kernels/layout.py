@@ -174,6 +174,28 @@ PL_CONE_SCALE = 9
 PL_CONE_OFFSET = 10
 PL_WIDTH = 11
 # light_ref[k]: triangle index of light k, or point_light_ref(p) for point light p
+# The light tree (render.lightSampler "tree"; kernels.lights, accel.light_tree): one node per
+# row of lt_node, float32 (L, LT_WIDTH), the bounds of the lights below it (Conty Estevez and
+# Kulla 2018; pbrt-v4's LightBounds): the sphere around their box, the cone of their normals
+# (axis, cos and sin of its half-angle theta_o), the cosine of the widest emission angle
+# around a normal (theta_e), their summed power, and whether any emits on both sides; in
+# three 16-byte groups (kernels.loads).
+LT_CENTRE = 0         # xyz
+LT_RADIUS2 = 3        # squared radius of the sphere around the box
+LT_AXIS = 4           # xyz: unit axis of the normals' cone
+LT_POWER = 7
+LT_COS_O = 8
+LT_SIN_O = 9
+LT_COS_E = 10
+LT_TWO_SIDED = 11     # 1.0 or 0.0
+LT_WIDTH = 12
+# lt_link, int32 (L, LT_LINK_WIDTH): an inner node's two children, a leaf's light (LT_LEFT =
+# leaf_light_ref(k), negative, for light k of light_ref), and each node's parent (-1: root).
+# tri_light_leaf, int32 (N,): the leaf of an emissive triangle (-1: none).
+LT_LEFT = 0
+LT_RIGHT = 1
+LT_PARENT = 2
+LT_LINK_WIDTH = 3
 # env_info, float32 (ENV_INFO_SIZE,)
 ENV_COS_ROT = 0       # cos and sin of the map's rotation about +Y
 ENV_SIN_ROT = 1
@@ -300,6 +322,7 @@ class Features(NamedTuple):
     flatness: bool = True      # the scene's "subsurface"
     spec_tint: bool = True
     anisotropic: bool = True
+    light_tree: bool = False   # lights picked by the light tree (else by power alone)
 
 
 class Specialisation(NamedTuple):
@@ -324,6 +347,7 @@ class Specialisation(NamedTuple):
     wrap_modes: bool       # texture wrap modes other than repeat
     mipmaps: bool          # trilinear textures: ray-cone footprints for their lookups
     lobes: tuple           # kernels.principled.Lobes: the principled BSDF's parts compiled
+    light_tree: bool       # lights picked by the light tree at each shading point
 
 
 def specialise(features):
@@ -341,7 +365,8 @@ def specialise(features):
         lean=not f.principled and not fold, sobol=f.sobol,
         wrap_modes=f.wrap_modes and f.textures, mipmaps=f.mipmaps and f.textures,
         lobes=(f.dielectric, f.clearcoat, f.sheen, f.transmission, f.flatness, f.spec_tint,
-               f.anisotropic))
+               f.anisotropic),
+        light_tree=f.light_tree and any_lights)
 
 
 class SceneArrays(NamedTuple):
@@ -351,7 +376,10 @@ class SceneArrays(NamedTuple):
     tri_n: np.ndarray          # float32 (N, TRI_N_WIDTH) (smooth only)
     tri_mat: np.ndarray        # int32 (N,)
     mat: np.ndarray            # float32 (M, MAT_WIDTH)
-    tri_light_pdf: np.ndarray  # float32 (N,): selection probability / area; 0 if not emissive
+    # float32 (N,): selection probability / area; 0 if not emissive. With the light tree:
+    # the probability of picking a light rather than the environment / area (the tree's
+    # pmf, which depends on the shading point, multiplies it).
+    tri_light_pdf: np.ndarray
     light_cdf: np.ndarray      # float32 (K + 1,)
     light_ref: np.ndarray      # int32 (K,): triangle index, or point_light_ref(p)
     point_lights: np.ndarray   # float32 (P, PL_WIDTH)
@@ -369,12 +397,21 @@ class SceneArrays(NamedTuple):
     env_cond: np.ndarray       # float32 (H, W + 1)
     env_pdf: np.ndarray        # float32 (H, W)
     env_info: np.ndarray       # float32 (ENV_INFO_SIZE,)
+    lt_node: np.ndarray        # float32 (L, LT_WIDTH) (light tree only)
+    lt_link: np.ndarray        # int32 (L, LT_LINK_WIDTH) (light tree only)
+    tri_light_leaf: np.ndarray  # int32 (N,) (light tree only)
 
 
 @device
 def point_light_ref(p):
     """light_ref entry of point light p (negative: triangles have indices >= 0)."""
     return -(p + 1)
+
+
+@device
+def leaf_light_ref(k):
+    """lt_link[n, LT_LEFT] of a leaf over light k (negative: inner nodes' children are >= 1)."""
+    return -(k + 1)
 
 
 @device

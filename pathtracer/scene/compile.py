@@ -30,7 +30,7 @@ from ..kernels.envmap import environment_tables
 from ..kernels.layout import (CAM_CONE, CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_LENS_Y, CAM_ORIGIN,
                               CAM_RIGHT,
                               CAM_SIZE, CAM_UP, ENV_COS_ROT, ENV_INFO_SIZE, ENV_P_SELECT,
-                              ENV_SIN_ROT, FILTER_BILINEAR, FILTER_NEAREST, FILTER_TRILINEAR,
+                              ENV_SIN_ROT, FILTER_BILINEAR, LT_LINK_WIDTH, LT_WIDTH, FILTER_NEAREST, FILTER_TRILINEAR,
                               M_ALBEDO, M_ANISOTROPIC, M_EMISSION, M_ETA, M_TWO_SIDED, M_TYPE,
                               MAT_DIFFUSE, MAT_PRINCIPLED, MAT_WIDTH, MATERIAL_PARAMS, N_SLOTS,
                               NO_TEXTURE, PL_AXIS, PL_CONE_OFFSET, PL_CONE_SCALE, PL_INTENSITY,
@@ -42,6 +42,7 @@ from ..kernels.layout import (CAM_CONE, CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_
                               TRI_N_WIDTH, TRI_T0, TRI_T_SIGN, TRI_T_WIDTH, TRI_UV_WIDTH, TRI_V0,
                               TRI_V_WIDTH, Features, SceneArrays, point_light_ref)
 from ..kernels import layout as L
+from ..accel.light_tree import LightBounds, build_light_tree
 from .errors import SceneError
 from .geometry import safe_normalize, vertex_normals, vertex_tangents
 from .images import (load_texture, mip_chain, mip_levels, mip_texels, read_image,
@@ -149,7 +150,11 @@ def compile_scene(desc, use_cache=True, bvh_options=None, memo=None):
                                          bvh_options)
     lights = compile_lights(desc, tri, mat, tables.power, tri.shift)
     env = compile_environment(desc, has_lights=len(lights.light_ref_list) > 0, memo=memo)
-    tri_light_pdf = triangle_light_pdfs(lights, tri, env.p_lights)
+    tree = None
+    if use_light_tree(desc.render.light_sampler, len(lights.light_ref_list)):
+        tree = build_light_tree(lights.bounds)
+    tri_light_pdf = triangle_light_pdfs(lights, tri, env.p_lights, tree is not None)
+    lt_node, lt_link, tri_light_leaf = light_tree_arrays(tree, lights, tri)
     features = Features(
         tri_lights=lights.has_tri_lights, point_lights=lights.has_point_lights,
         environment=env.constant, smooth=tri.smooth, principled=tables.any_principled,
@@ -158,7 +163,7 @@ def compile_scene(desc, use_cache=True, bvh_options=None, memo=None):
         sobol=desc.render.sampler == "sobol",
         wrap_modes=use_textures and any(p[4] != ("repeat", "repeat") for p in tables.tex_params),
         mipmaps=use_textures and any(p[0] == "trilinear" for p in tables.tex_params),
-        **principled_lobes(mat, mat_tex))
+        light_tree=tree is not None, **principled_lobes(mat, mat_tex))
     cam = camera_array(desc.camera, tri.shift, desc.render.spp)
     if not (np.isfinite(cam).all() and np.abs(cam).max() <= limits.FLOAT32_MAX):
         raise SceneError("the camera's numbers overflow float32 (position, fov, aperture or "
@@ -170,7 +175,8 @@ def compile_scene(desc, use_cache=True, bvh_options=None, memo=None):
         point_lights=lights.point_lights, env=env.color, bvh_box=tri.bvh.box,
         bvh_child=tri.bvh.child, tri_uv=tri.tri_uv, tri_t=tri.tri_t, mat_tex=mat_tex,
         tex_data=tex_data, tex_int=tex_int, tex_f=tex_f, env_img=env.img, env_marg=env.marg,
-        env_cond=env.cond, env_pdf=env.pdf, env_info=env.info)
+        env_cond=env.cond, env_pdf=env.pdf, env_info=env.info, lt_node=lt_node,
+        lt_link=lt_link, tri_light_leaf=tri_light_leaf)
     w, h = desc.camera.resolution
     r = desc.render
     timings = {"mesh_load": t_mesh,
@@ -755,6 +761,21 @@ class Lights(NamedTuple):
     point_lights: np.ndarray
     has_tri_lights: bool
     has_point_lights: bool
+    bounds: LightBounds    # of light_ref's lights, for the light tree
+
+
+# render.lightSampler "auto" picks the light tree from this many lights on: one emissive
+# quad (two triangles) gains nothing from it, and it costs a few per cent of a path's time
+LIGHT_TREE_MIN_LIGHTS = 3
+
+
+def use_light_tree(light_sampler, n_lights):
+    """Whether the scene's lights are picked by the light tree (kernels.lights): "tree"
+    always (with at least two lights to choose from), "power" never, "auto" from
+    LIGHT_TREE_MIN_LIGHTS lights on."""
+    if light_sampler == "power" or n_lights < 2:
+        return False
+    return light_sampler == "tree" or n_lights >= LIGHT_TREE_MIN_LIGHTS
 
 
 def geometry_sphere(tri):
@@ -824,6 +845,7 @@ def compile_lights(desc, tri, mat, mat_power, shift):
     sphere = geometry_sphere(tri) if (desc.point_lights or suns) else None
     point_list = list(desc.point_lights) + place_suns(suns, sphere, shift)
     weights, refs = [], []
+    bounds = []           # LightBounds' fields per light (lo, hi, axis, cos_o, cos_e, power, 2-sided)
     if tri.n:
         two_sided = np.where(mat[:, M_TWO_SIDED] > 0, 2, 1)
         mat_pow = np.asarray(mat_power, np.float64) * two_sided
@@ -831,15 +853,22 @@ def compile_lights(desc, tri, mat, mat_power, shift):
         emissive = np.nonzero(tri_power > 0)[0]
         weights.extend(tri_power[emissive])
         refs.extend(emissive.tolist())
+        if len(emissive):
+            bounds.append(_triangle_bounds(tri, mat, emissive, tri_power[emissive]))
+    point_bounds = []
     for i, light in enumerate(point_list):
         # a spot light's power: about 2 pi (1 - cos of its cone's mean half-angle) I
         solid = 4 * math.pi if light.axis is None else 2 * math.pi * (1 - math.cos(
             math.radians((light.inner_angle + light.outer_angle) / 2)))
-        p = solid * float(np.mean(light.intensity)) * reaching_fraction(
+        mean_i = float(np.mean(light.intensity))
+        p = solid * mean_i * reaching_fraction(
             np.asarray(light.position, np.float64) - shift, sphere)
         if p > 0:
             weights.append(p)
             refs.append(point_light_ref(i))
+            point_bounds.append(_point_bounds(light, shift, mean_i))
+    if point_bounds:
+        bounds.append(tuple(np.asarray(f) for f in zip(*point_bounds)))
     weights = np.asarray(weights, np.float64)
     cdf = np.zeros(len(weights) + 1, np.float64)
     if len(weights):
@@ -861,17 +890,65 @@ def compile_lights(desc, tri, mat, mat_power, shift):
             point_lights[i, PL_AXIS:PL_AXIS + 3] = light.axis
             point_lights[i, PL_CONE_SCALE] = cone_scale
             point_lights[i, PL_CONE_OFFSET] = -cos_out * cone_scale
+    light_bounds = LightBounds(*(np.concatenate([b[f] for b in bounds]) if bounds else
+                                 np.zeros((0, 3) if f < 3 else 0) for f in range(7)))
     return Lights(light_cdf, light_ref, refs, point_lights, any(r >= 0 for r in refs),
-                  any(r < 0 for r in refs))
+                  any(r < 0 for r in refs), light_bounds)
 
 
-def triangle_light_pdfs(lights, tri, p_lights):
+def _triangle_bounds(tri, mat, emissive, power):
+    """LightBounds' fields of the emissive triangles (shifted coordinates): the triangle's
+    box, its normal as a cone of half-angle 0, emission up to 90 degrees from it."""
+    v = tri.tri_v[emissive].astype(np.float64)
+    v0 = v[:, TRI_V0:TRI_V0 + 3]
+    v1 = v0 + v[:, TRI_E1:TRI_E1 + 3]
+    v2 = v0 + v[:, TRI_E2:TRI_E2 + 3]
+    n = np.cross(v[:, TRI_E1:TRI_E1 + 3], v[:, TRI_E2:TRI_E2 + 3])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    k = len(emissive)
+    return (np.minimum(np.minimum(v0, v1), v2), np.maximum(np.maximum(v0, v1), v2), n,
+            np.ones(k), np.zeros(k), np.asarray(power, np.float64),
+            mat[tri.tri_mat[emissive], M_TWO_SIDED] > 0)
+
+
+def _point_bounds(light, shift, mean_intensity):
+    """LightBounds' fields of a point or spot light (shifted coordinates). Its power for
+    the tree is pi I, so that power / distance^2 bounds its irradiance as the triangles'
+    pi L A does theirs (pbrt-v4 counts 4 pi I); a spot light's normals are its inner cone,
+    its emission reaches outer - inner beyond (pbrt-v4's SpotLight::Bounds)."""
+    p = np.asarray(light.position, np.float64) - shift
+    if light.axis is None:
+        axis, cos_o, cos_e = (0.0, 0.0, 1.0), -1.0, 0.0
+    else:
+        axis = light.axis
+        cos_o = math.cos(math.radians(light.inner_angle))
+        cos_e = math.cos(math.radians(max(0.0, light.outer_angle - light.inner_angle)))
+    return p, p, np.asarray(axis, np.float64), cos_o, cos_e, math.pi * mean_intensity, False
+
+
+def light_tree_arrays(tree, lights, tri):
+    """(lt_node, lt_link, tri_light_leaf) for SceneArrays: the tree's, or one dummy row
+    each without it."""
+    if tree is None:
+        return (np.zeros((1, LT_WIDTH), np.float32),
+                np.full((1, LT_LINK_WIDTH), -1, np.int32), np.full(1, -1, np.int32))
+    tri_light_leaf = np.full(max(1, tri.n), -1, np.int32)
+    for k, ref in enumerate(lights.light_ref_list):
+        if ref >= 0:
+            tri_light_leaf[ref] = tree.leaf[k]
+    return tree.node, tree.link, tri_light_leaf
+
+
+def triangle_light_pdfs(lights, tri, p_lights, tree=False):
     """Each triangle's selection probability (times p_lights, the chance that a light
     rather than the environment is sampled) over its area: the area density with which
-    next-event estimation samples it, 0 for triangles that do not emit."""
+    next-event estimation samples it, 0 for triangles that do not emit. With the light
+    tree the selection probability depends on the shading point and is left out (the
+    kernels multiply by the tree's)."""
     tri_light_pdf = np.zeros(max(1, tri.n), np.float32)
     for k, ref in enumerate(lights.light_ref_list):
         if ref >= 0:
-            pmf = (float(lights.light_cdf[k + 1]) - float(lights.light_cdf[k])) * p_lights
-            tri_light_pdf[ref] = pmf / tri.area[ref]
+            pmf = 1.0 if tree else (float(lights.light_cdf[k + 1]) -
+                                    float(lights.light_cdf[k]))
+            tri_light_pdf[ref] = pmf * p_lights / tri.area[ref]
     return tri_light_pdf

@@ -36,6 +36,7 @@ class Camera:
 
 
 SAMPLERS = ("sobol", "independent")
+LIGHT_SAMPLERS = ("auto", "tree", "power")
 TONEMAPS = ("clamp", "aces", "agx")          # pathtracer.tonemap.TONEMAPS
 
 
@@ -46,6 +47,7 @@ class RenderSettings:
     rr_depth: int = 5
     seed: int = 0
     sampler: str = "sobol"     # or "independent"
+    light_sampler: str = "auto"   # or "tree", "power" (scene.compile.use_light_tree)
     exposure: float = 0.0      # EV, 8-bit outputs only (pathtracer.tonemap)
     tonemap: str = "clamp"     # or "aces", "agx"
 
@@ -517,6 +519,7 @@ def _render(n):
         rr_depth=n.integer("rrDepth", 5, lo=0, hi=limits.MAX_BOUNCES),
         seed=n.integer("seed", 0, lo=0, hi=limits.MAX_SEED),
         sampler=n.string("sampler", "sobol", choices=SAMPLERS),
+        light_sampler=n.string("lightSampler", "auto", choices=LIGHT_SAMPLERS),
         exposure=n.number("exposure", 0.0, lo=-limits.MAX_EXPOSURE, hi=limits.MAX_EXPOSURE),
         tonemap=n.string("tonemap", "clamp", choices=TONEMAPS))
     n.finish()

@@ -1,0 +1,308 @@
+"""The light tree: a binary tree over the scene's lights whose nodes bound the lights below
+them in space, orientation and power, so that next-event estimation can pick a light by
+what it may send to the shading point (kernels.lights.sample_light_tree).
+
+Conty Estevez and Kulla 2018, "Importance Sampling of Many Lights with Adaptive Tree
+Splitting", as pbrt-v4's ``BVHLightSampler`` builds it: each light's bounds are its box, the
+cone of its normals (half-angle theta_o around an axis), the widest angle theta_e its
+emission leaves a normal at, and its power; a node's bounds are their union; splits are
+chosen over 12 bins per axis by the surface area and orientation heuristic (SAOH: power x
+the orientation cone's measure x box area, with the node box's aspect ratio on the split
+axis). Each leaf holds one light. Host code compiled with ``@njit``.
+"""
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from .._cache import jit_cache
+from ..kernels.layout import (LT_AXIS, LT_CENTRE, LT_COS_E, LT_COS_O, LT_LEFT, LT_LINK_WIDTH,
+                              LT_PARENT, LT_POWER, LT_RADIUS2, LT_RIGHT, LT_SIN_O, LT_TWO_SIDED,
+                              LT_WIDTH)
+
+N_BINS = 12
+
+
+class LightBounds(NamedTuple):
+    """Per-light bounds, float64 arrays over K lights."""
+    lo: np.ndarray         # (K, 3)
+    hi: np.ndarray         # (K, 3)
+    axis: np.ndarray       # (K, 3) unit
+    cos_o: np.ndarray      # (K,)
+    cos_e: np.ndarray      # (K,)
+    power: np.ndarray      # (K,) > 0
+    two_sided: np.ndarray  # (K,) bool
+
+
+class LightTree(NamedTuple):
+    node: np.ndarray       # float32 (L, LT_WIDTH)
+    link: np.ndarray       # int32 (L, LT_LINK_WIDTH)
+    leaf: np.ndarray       # int32 (K,): the leaf of light k
+    depth: int
+
+
+@njit(cache=jit_cache())
+def _rotate(v, axis, angle):
+    """v turned by angle about the unit axis (Rodrigues)."""
+    c = math.cos(angle)
+    s = math.sin(angle)
+    kx, ky, kz = axis
+    vx, vy, vz = v
+    d = kx * vx + ky * vy + kz * vz
+    cx = ky * vz - kz * vy
+    cy = kz * vx - kx * vz
+    cz = kx * vy - ky * vx
+    return (vx * c + cx * s + kx * d * (1 - c), vy * c + cy * s + ky * d * (1 - c),
+            vz * c + cz * s + kz * d * (1 - c))
+
+
+@njit(cache=jit_cache())
+def _cone_union(wa, cos_a, wb, cos_b):
+    """The smallest cone (axis, cos of half-angle) around two cones (pbrt-v4's
+    ``Union(DirectionCone, DirectionCone)``)."""
+    theta_a = math.acos(min(max(cos_a, -1.0), 1.0))
+    theta_b = math.acos(min(max(cos_b, -1.0), 1.0))
+    d = wa[0] * wb[0] + wa[1] * wb[1] + wa[2] * wb[2]
+    theta_d = math.acos(min(max(d, -1.0), 1.0))
+    if min(theta_d + theta_b, math.pi) <= theta_a:
+        return wa, cos_a
+    if min(theta_d + theta_a, math.pi) <= theta_b:
+        return wb, cos_b
+    theta_o = (theta_a + theta_d + theta_b) / 2
+    if theta_o >= math.pi:
+        return (0.0, 0.0, 1.0), -1.0
+    theta_r = theta_o - theta_a
+    rx = wa[1] * wb[2] - wa[2] * wb[1]
+    ry = wa[2] * wb[0] - wa[0] * wb[2]
+    rz = wa[0] * wb[1] - wa[1] * wb[0]
+    rl = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if not rl > 1e-12:
+        return (0.0, 0.0, 1.0), -1.0
+    w = _rotate(wa, (rx / rl, ry / rl, rz / rl), theta_r)
+    return w, math.cos(theta_o)
+
+
+@njit(cache=jit_cache())
+def _orientation_measure(cos_o, cos_e):
+    """M_omega of Conty Estevez and Kulla: the solid-angle measure of the directions a node
+    may emit into."""
+    theta_o = math.acos(min(max(cos_o, -1.0), 1.0))
+    theta_e = math.acos(min(max(cos_e, -1.0), 1.0))
+    theta_w = min(theta_o + theta_e, math.pi)
+    sin_o = math.sqrt(max(0.0, 1.0 - cos_o * cos_o))
+    return (2 * math.pi * (1 - cos_o) +
+            math.pi / 2 * (2 * theta_w * sin_o - math.cos(theta_o - 2 * theta_w) -
+                           2 * theta_o * sin_o + cos_o))
+
+
+@njit(cache=jit_cache())
+def _area(lo, hi):
+    dx = max(hi[0] - lo[0], 0.0)
+    dy = max(hi[1] - lo[1], 0.0)
+    dz = max(hi[2] - lo[2], 0.0)
+    return 2 * (dx * dy + dy * dz + dz * dx)
+
+
+@njit(cache=jit_cache())
+def _merge(acc, lo, hi, w, cos_o, cos_e, power, two_sided):
+    """acc (a float64 row: lo 0-2, hi 3-5, axis 6-8, cos_o 9, cos_e 10, power 11,
+    two-sided 12; power 0 = empty) grown by one set of bounds, in place."""
+    if acc[11] <= 0:
+        for c in range(3):
+            acc[c] = lo[c]
+            acc[3 + c] = hi[c]
+            acc[6 + c] = w[c]
+        acc[9] = cos_o
+        acc[10] = cos_e
+        acc[11] = power
+        acc[12] = 1.0 if two_sided else 0.0
+        return
+    for c in range(3):
+        acc[c] = min(acc[c], lo[c])
+        acc[3 + c] = max(acc[3 + c], hi[c])
+    axis, cos_u = _cone_union((acc[6], acc[7], acc[8]), acc[9], (w[0], w[1], w[2]), cos_o)
+    acc[6] = axis[0]
+    acc[7] = axis[1]
+    acc[8] = axis[2]
+    acc[9] = cos_u
+    acc[10] = min(acc[10], cos_e)
+    acc[11] += power
+    if two_sided:
+        acc[12] = 1.0
+
+
+@njit(cache=jit_cache())
+def _cost(acc, kr):
+    if acc[11] <= 0:
+        return 0.0
+    return acc[11] * _orientation_measure(acc[9], acc[10]) * kr * _area(acc[0:3], acc[3:6])
+
+
+@njit(cache=jit_cache())
+def _build(lo, hi, axis, cos_o, cos_e, power, two_sided, node, link, leaf):
+    k_lights = lo.shape[0]
+    order = np.arange(k_lights)
+    centre = (lo + hi) * 0.5
+    # tasks: (node, start, end, parent, depth)
+    stack = np.empty((max(1, k_lights), 5), np.int64)
+    stack[0, 0] = 0
+    stack[0, 1] = 0
+    stack[0, 2] = k_lights
+    stack[0, 3] = -1
+    stack[0, 4] = 1
+    top = 1
+    next_node = 1
+    depth = 1
+    bins = np.zeros((N_BINS, 13))
+    left = np.zeros((N_BINS, 13))
+    acc = np.zeros(13)
+    bin_of = np.empty(k_lights, np.int64)
+    while top > 0:
+        top -= 1
+        n = stack[top, 0]
+        start = stack[top, 1]
+        end = stack[top, 2]
+        parent = stack[top, 3]
+        level = stack[top, 4]
+        depth = max(depth, level)
+        link[n, LT_PARENT] = parent
+        if end - start == 1:
+            k = order[start]
+            link[n, LT_LEFT] = -(k + 1)
+            link[n, LT_RIGHT] = -1
+            leaf[k] = n
+            continue
+        # the node's box and its centroids' box
+        blo = np.full(3, np.inf)
+        bhi = np.full(3, -np.inf)
+        clo = np.full(3, np.inf)
+        chi = np.full(3, -np.inf)
+        for i in range(start, end):
+            k = order[i]
+            for c in range(3):
+                blo[c] = min(blo[c], lo[k, c])
+                bhi[c] = max(bhi[c], hi[k, c])
+                clo[c] = min(clo[c], centre[k, c])
+                chi[c] = max(chi[c], centre[k, c])
+        diag_max = max(bhi[0] - blo[0], max(bhi[1] - blo[1], bhi[2] - blo[2]))
+        best_cost = np.inf
+        best_dim = -1
+        best_bin = -1
+        for dim in range(3):
+            extent = chi[dim] - clo[dim]
+            if not extent > 0:
+                continue
+            bins[:, :] = 0.0
+            for i in range(start, end):
+                k = order[i]
+                b = min(N_BINS - 1, int(N_BINS * (centre[k, dim] - clo[dim]) / extent))
+                _merge(bins[b], lo[k], hi[k], axis[k], cos_o[k], cos_e[k], power[k],
+                       two_sided[k])
+            edge = bhi[dim] - blo[dim]
+            kr = diag_max / edge if edge > 0 else 1.0
+            # prefix unions (bins 0..b), then suffix unions swept from the right
+            acc[:] = 0.0
+            for b in range(N_BINS - 1):
+                if bins[b, 11] > 0:
+                    _merge(acc, bins[b, 0:3], bins[b, 3:6], bins[b, 6:9], bins[b, 9],
+                           bins[b, 10], bins[b, 11], bins[b, 12] > 0)
+                left[b, :] = acc
+            acc[:] = 0.0
+            for b in range(N_BINS - 1, 0, -1):
+                if bins[b, 11] > 0:
+                    _merge(acc, bins[b, 0:3], bins[b, 3:6], bins[b, 6:9], bins[b, 9],
+                           bins[b, 10], bins[b, 11], bins[b, 12] > 0)
+                if acc[11] > 0 and left[b - 1, 11] > 0:
+                    cost = _cost(left[b - 1], kr) + _cost(acc, kr)
+                    if cost < best_cost:
+                        best_cost = cost
+                        best_dim = dim
+                        best_bin = b - 1
+        mid = start
+        if best_dim >= 0:
+            extent = chi[best_dim] - clo[best_dim]
+            for i in range(start, end):
+                k = order[i]
+                b = min(N_BINS - 1, int(N_BINS * (centre[k, best_dim] - clo[best_dim]) /
+                                        extent))
+                bin_of[i] = b
+            # partition: lights in bins <= best_bin first
+            j = start
+            for i in range(start, end):
+                if bin_of[i] <= best_bin:
+                    tmp = order[j]
+                    order[j] = order[i]
+                    order[i] = tmp
+                    tb = bin_of[j]
+                    bin_of[j] = bin_of[i]
+                    bin_of[i] = tb
+                    j += 1
+            mid = j
+        if mid <= start or mid >= end:
+            mid = (start + end) // 2     # coincident centroids: split the range in two
+        c0 = next_node
+        c1 = next_node + 1
+        next_node += 2
+        link[n, LT_LEFT] = c0
+        link[n, LT_RIGHT] = c1
+        stack[top, 0] = c1
+        stack[top, 1] = mid
+        stack[top, 2] = end
+        stack[top, 3] = n
+        stack[top, 4] = level + 1
+        top += 1
+        stack[top, 0] = c0
+        stack[top, 1] = start
+        stack[top, 2] = mid
+        stack[top, 3] = n
+        stack[top, 4] = level + 1
+        top += 1
+    # bounds bottom-up: children are numbered after their parents
+    rows = np.zeros((next_node, 13))
+    for n in range(next_node - 1, -1, -1):
+        first = link[n, LT_LEFT]
+        if first < 0:
+            k = -first - 1
+            _merge(rows[n], lo[k], hi[k], axis[k], cos_o[k], cos_e[k], power[k],
+                   two_sided[k])
+        else:
+            for side in range(2):
+                c = link[n, LT_LEFT + side * (LT_RIGHT - LT_LEFT)]
+                _merge(rows[n], rows[c, 0:3], rows[c, 3:6], rows[c, 6:9], rows[c, 9],
+                       rows[c, 10], rows[c, 11], rows[c, 12] > 0)
+    for n in range(next_node):
+        r2 = 0.0
+        for c in range(3):
+            node[n, LT_CENTRE + c] = (rows[n, c] + rows[n, 3 + c]) / 2
+            r2 += ((rows[n, 3 + c] - rows[n, c]) / 2) ** 2
+            node[n, LT_AXIS + c] = rows[n, 6 + c]
+        # (rounded up, so that the float32 sphere still holds the box)
+        node[n, LT_RADIUS2] = r2 * (1 + 1e-6)
+        node[n, LT_COS_O] = rows[n, 9]
+        node[n, LT_SIN_O] = math.sqrt(max(0.0, 1.0 - rows[n, 9] * rows[n, 9]))
+        node[n, LT_COS_E] = rows[n, 10]
+        node[n, LT_POWER] = rows[n, 11]
+        node[n, LT_TWO_SIDED] = rows[n, 12]
+    return next_node, depth
+
+
+def build_light_tree(bounds):
+    """The :class:`LightTree` over lights with :class:`LightBounds` ``bounds`` (at least one
+    light). Power is normalised to sum 1 at the root (only ratios matter; float32-safe)."""
+    k = len(bounds.power)
+    if k < 1:
+        raise ValueError("a light tree needs at least one light")
+    power = np.asarray(bounds.power, np.float64)
+    power = power / power.sum()
+    node = np.zeros((2 * k - 1, LT_WIDTH), np.float32)
+    link = np.full((2 * k - 1, LT_LINK_WIDTH), -1, np.int32)
+    leaf = np.full(k, -1, np.int32)
+    n, depth = _build(np.ascontiguousarray(bounds.lo, np.float64),
+                      np.ascontiguousarray(bounds.hi, np.float64),
+                      np.ascontiguousarray(bounds.axis, np.float64),
+                      np.ascontiguousarray(bounds.cos_o, np.float64),
+                      np.ascontiguousarray(bounds.cos_e, np.float64), power,
+                      np.ascontiguousarray(bounds.two_sided, np.bool_), node, link, leaf)
+    assert n == 2 * k - 1
+    return LightTree(node, link, leaf, int(depth))
