@@ -202,7 +202,7 @@ class Scene:
         o = self._overrides
         if o.get("resolution"):
             desc.camera.resolution = tuple(o["resolution"])
-        for key in ("sampler", "exposure", "tonemap"):
+        for key in ("sampler", "light_sampler", "exposure", "tonemap"):
             if o.get(key) is not None:
                 setattr(desc.render, key, o[key])
         from .memory import check_film
@@ -266,8 +266,8 @@ def load_scene(source, allow_missing=False, base=None, camera=None, environment=
     ``environment``: an environment map's path (or a dict of the format's environment
     keys) that replaces the scene's environment, or "none" to remove it.
 
-    (``_overrides``: resolution, sampler, exposure or tonemap that replace the scene's, as
-    the CLI's flags; ``_check(description)``: a test run before compiling, such as the
+    (``_overrides``: resolution, sampler, light_sampler, exposure or tonemap that replace
+    the scene's, as the CLI's flags; ``_check(description)``: a test run before compiling, such as the
     CLI's GPU memory check.)"""
     if isinstance(source, dict):
         data = _with_view(_plain(source), camera, environment, None)

@@ -21,7 +21,7 @@ from .errors import (EXIT_INPUT, EXIT_INTERNAL, EXIT_IO, EXIT_OK, InputError, In
                      OutputError)
 from .film import ALL_FORMATS, read_image, relmse, write_images
 from .scene import SceneError
-from .scene.loader import SAMPLERS, TONEMAPS
+from .scene.loader import LIGHT_SAMPLERS, SAMPLERS, TONEMAPS
 
 PREVIEW_PORT = 8765
 STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP")
@@ -197,6 +197,10 @@ def build_parser():
     p.add_argument("--sampler", choices=SAMPLERS,
                    help="sobol (Owen-scrambled, low discrepancy) or independent; "
                         "default: the scene's render.sampler (sobol)")
+    p.add_argument("--light-sampler", choices=LIGHT_SAMPLERS,
+                   help="how next-event estimation picks a light: tree (by what it can send "
+                        "to the shading point), power, or auto (the tree from 3 lights on); "
+                        "default: the scene's render.lightSampler (auto)")
     p.add_argument("--exposure", type=_exposure, metavar="EV",
                    help="exposure of the PNG in stops (x 2^EV before the tone curve); "
                         "default: the scene's render.exposure (0). EXR/HDR/NPY stay linear")
@@ -535,6 +539,7 @@ def _render(args, scene_path, signals):
     scene = load_scene(scene_path, allow_missing=args.allow_missing, camera=args.camera,
                        environment=args.env,
                        _overrides={"resolution": args.resolution, "sampler": args.sampler,
+                                   "light_sampler": args.light_sampler,
                                    "exposure": args.exposure, "tonemap": args.tonemap},
                        _check=lambda desc: check_film(*desc.camera.resolution, args.backend))
     signals.check()

@@ -146,6 +146,22 @@ def test_sampler_option(tmp_path, small_scene):
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
 
 
+def test_light_sampler_option(tmp_path, small_scene):
+    """--light-sampler overrides render.lightSampler (the furnace's 288 emitting triangles
+    pick the tree by default); both agree in the mean."""
+    means = {}
+    for choice in (None, "power"):
+        out = tmp_path / f"{choice}.npy"
+        extra = () if choice is None else ("--light-sampler", choice)
+        r = pt_render(small_scene, "-o", out, "--spp", 16, "--quiet", *extra)
+        assert r.returncode == 0, r.stderr
+        assert ("light_tree" in r.stderr.split("features")[1]) == (choice is None), r.stderr
+        means[choice] = np.load(out).mean()
+    assert abs(means[None] - means["power"]) < 0.02
+    r = pt_render(small_scene, "--light-sampler", "bvh")
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+
+
 def test_adaptive_option(tmp_path, small_scene):
     out = tmp_path / "a.npy"
     r = pt_render(small_scene, "-o", out, "--spp", 64, "--adaptive", "1e-2", "--quiet")
