@@ -2,8 +2,13 @@
 samples, time per sample, and their product, on a scene of many lights and on the Cornell
 box (two light triangles, where "auto" keeps the power sampler):
 
-    python -m bench.light_sampler [--backend cpu|cuda] [--scenes lamps cornell-box]
-        [--spp 64] [--seeds 4] [--repeats 5] [--ref-spp 4096] [--json PATH]
+    python -m bench.light_sampler [--backend cpu|cuda] [--scenes lamps lamps-area cornell-box]
+        [--spp 64] [--seeds 4] [--repeats 5] [--ref-spp 4096] [--json PATH] [--mitsuba]
+
+``lamps-area`` is ``lamps`` without its spot and point light, which Mitsuba 3 renders too
+(``--mitsuba``: ``llvm_ad_rgb`` on the CPU, ``cuda_ad_rgb`` with ``--backend cuda``; its
+``independent`` and ``multijitter`` samplers, each measured against Mitsuba's own reference
+of ``--ref-spp`` samples, rendered in chunks of 1,024).
 
 relMSE is measured against one long render of the scene with the tree (``--ref-spp``;
 seeds far from the measured ones), the mean over ``--seeds`` renders of ``--spp`` samples;
@@ -17,17 +22,19 @@ import time
 
 import numpy as np
 
-from bench.common import CORNELL, command, machine, now, versions
+from bench.common import (CORNELL, command, machine, mitsuba_pass_times, now, usable_mitsuba,
+                          versions)
 from bench.metrics import relmse
 
-SCENES = {"lamps": (192, 144), "cornell-box": (256, 256)}
+SCENES = {"lamps": (192, 144), "lamps-area": (192, 144), "cornell-box": (256, 256)}
+REFERENCES = {}     # ours, by scene (Mitsuba's rows say how far its own is from ours)
 
 
 def describe_scene(name, light_sampler, res):
     from pathtracer.scene import load_scene_description
     from bench.scenes import describe, lamps
-    if name == "lamps":
-        desc = describe(lamps(res, light_sampler))
+    if name.startswith("lamps"):
+        desc = describe(lamps(res, light_sampler, punctual=name == "lamps"))
     else:
         desc = load_scene_description(CORNELL)
         desc.render.light_sampler = light_sampler
@@ -52,6 +59,8 @@ def main(argv=None):
     p.add_argument("--ref-spp", type=int, default=4096)
     p.add_argument("--scale", type=int, default=1, help="resolution x this")
     p.add_argument("--json", default=None)
+    p.add_argument("--mitsuba", action="store_true",
+                   help="Mitsuba 3 on lamps-area in the same run")
     args = p.parse_args(argv)
     from pathtracer.backends import make_backend
     from pathtracer.scene import compile_scene
@@ -69,6 +78,7 @@ def main(argv=None):
         t = time.perf_counter()
         ref = render(backends["tree"], scenes["tree"], args.ref_spp, 1_000_003)
         ref_seconds = time.perf_counter() - t
+        REFERENCES[name] = ref
         for sampler in ("power", "tree"):
             scene, backend = scenes[sampler], backends[sampler]
             errors = [relmse(render(backend, scene, args.spp, seed), ref)
@@ -81,7 +91,7 @@ def main(argv=None):
                 times.append(time.perf_counter() - t)
             seconds = float(np.median(times))
             err = float(np.mean(errors))
-            row = {"scene": name, "light_sampler": sampler, "resolution": list(res),
+            row = {"scene": name, "renderer": "pt-render", "light_sampler": sampler, "resolution": list(res),
                    "spp": args.spp, "relMSE": err,
                    "relMSE_stderr": float(np.std(errors, ddof=1) / np.sqrt(len(errors)))
                    if len(errors) > 1 else None,
@@ -98,6 +108,8 @@ def main(argv=None):
               f"{b['seconds'] / a['seconds']:.3f}x, error x time "
               f"{b['error_x_time'] / a['error_x_time']:.3f}x (reference {args.ref_spp} spp, "
               f"{ref_seconds:.1f} s)", flush=True)
+    if args.mitsuba and "lamps-area" in args.scenes:
+        rows += mitsuba_rows(args)
     record = {"command": command(), "machine": machine(), "date": now(),
               "versions": versions(), "backend": args.backend, "ref_spp": args.ref_spp,
               "rows": rows}
@@ -106,6 +118,55 @@ def main(argv=None):
         with open(args.json, "w") as f:
             json.dump(record, f, indent=1)
     return 0
+
+
+def mitsuba_rows(args):
+    """Mitsuba 3's relMSE at --spp (against its own reference) and time per render on
+    lamps-area, with its independent and multijitter samplers."""
+    variant = "cuda_ad_rgb" if args.backend == "cuda" else "llvm_ad_rgb"
+    ok, why = usable_mitsuba(variant)
+    if not ok:
+        print(f"Mitsuba left out: {why}")
+        return [{"scene": "lamps-area", "renderer": "mitsuba", "skipped": why}]
+    import drjit as dr
+    import mitsuba as mi
+    from pathtracer.mitsuba import mitsuba_dict
+    mi.set_variant(variant)
+    res = tuple(x * args.scale for x in SCENES["lamps-area"])
+    desc = describe_scene("lamps-area", "power", res)
+    rows = []
+    ref = None
+    for sampler in ("independent", "multijitter"):
+        scene = mi.load_dict(mitsuba_dict(desc, spp=args.spp, sampler=sampler))
+        if ref is None:
+            chunks = max(1, args.ref_spp // 1024)
+            t = time.perf_counter()
+            acc = 0
+            for c in range(chunks):
+                img = mi.render(scene, spp=min(args.ref_spp, 1024), seed=1_000_003 + c)
+                dr.eval(img)
+                acc = acc + np.array(img, np.float64)
+            ref = acc / chunks
+            agreement = relmse(ref[..., :3], REFERENCES["lamps-area"])
+            print(f"lamps-area Mitsuba reference: {chunks} x {min(args.ref_spp, 1024)} spp, "
+                  f"{time.perf_counter() - t:.1f} s; relMSE against ours {agreement:.2e}",
+                  flush=True)
+        errors = [relmse(np.array(mi.render(scene, spp=args.spp, seed=s))[..., :3], ref[..., :3])
+                  for s in range(args.seeds)]
+        first, seconds, times = mitsuba_pass_times(scene, args.spp, args.repeats)
+        err = float(np.mean(errors))
+        row = {"scene": "lamps-area", "renderer": "mitsuba", "variant": variant,
+               "sampler": sampler, "resolution": list(res), "spp": args.spp, "relMSE": err,
+               "relMSE_stderr": float(np.std(errors, ddof=1) / np.sqrt(len(errors)))
+               if len(errors) > 1 else None, "seconds": seconds, "times": times,
+               "first_render_s": first, "reference_agreement_relMSE": agreement,
+               "M_paths_per_s": res[0] * res[1] * args.spp / seconds / 1e6,
+               "error_x_time": err * seconds}
+        rows.append(row)
+        print(f"lamps-area Mitsuba {sampler}: relMSE {err:.3e} at {args.spp} spp, "
+              f"{seconds:.4f} s ({row['M_paths_per_s']:.2f} M paths/s), error x time "
+              f"{row['error_x_time']:.3e}", flush=True)
+    return rows
 
 
 if __name__ == "__main__":

@@ -88,13 +88,16 @@ def sun(res):
     }
 
 
-def lamps(res, light_sampler="auto"):
+def lamps(res, light_sampler="auto", punctual=True):
     """The Stanford bunny (principled, smooth) on a diffuse floor lit by many small lights:
-    an 8 x 8 grid of lamps (one-sided quads facing down, 128 triangles in 64 colours and
+    an 8 x 8 grid of lamps (one-sided squares facing down, 128 triangles in 64 colours and
     powers) spread over a floor far wider than the view, a small emissive sphere beside
-    the bunny, a spot light from above and a point light: most lights are far from most
-    shading points, the case the light tree (render.lightSampler) is for."""
+    the bunny (2,240 triangles), and with ``punctual`` a spot light from above and a point
+    light: most lights are far from most shading points, the case the light tree
+    (render.lightSampler) is for. Without ``punctual`` Mitsuba renders it too (area
+    lights only)."""
     bunny = os.path.join(MODELS, "stanford_bunny.obj")
+    plane = os.path.join(SCENES_DIR, "assets", "plane.obj")
     rng = np.random.default_rng(7)
     materials = [{"name": "floor", "type": "diffuse", "albedo": 0.6},
                  {"name": "bunny", "albedo": [0.75, 0.45, 0.25], "roughness": 0.35},
@@ -111,19 +114,21 @@ def lamps(res, light_sampler="auto"):
             name = f"lamp{i}{j}"
             materials.append({"name": name, "type": "diffuse", "albedo": 0.0,
                               "emission": (rng.random(3) * 6 + 1).round(2).tolist()})
-            objects.append({"name": name, "material": name,
-                            "vertices": [[x - s, 1.5, z - s], [x + s, 1.5, z - s],
-                                         [x + s, 1.5, z + s], [x - s, 1.5, z + s]],
-                            "faces": [[0, 1, 2], [0, 2, 3]]})
-    return {
+            # the unit plane (facing +y) turned 180 degrees about x: facing down
+            objects.append({"name": name, "file": plane, "material": name,
+                            "transform": {"matrix": [[s, 0, 0, x], [0, -s, 0, 1.5],
+                                                     [0, 0, -s, z], [0, 0, 0, 1]]}})
+    scene = {
         "camera": {"resolution": list(res), "position": [0.4, 1.0, 3.2],
                    "lookAt": [0, 0.4, 0], "fov": 40},
         "render": {"maxBounces": 8, "lightSampler": light_sampler},
         "materials": materials, "objects": objects,
-        "lights": [{"type": "spot", "position": [0, 2.5, 0], "intensity": 4,
-                    "direction": [0, -1, 0], "innerAngle": 10, "outerAngle": 25},
-                   {"type": "point", "position": [-1.5, 1.2, 1.0], "intensity": 0.5}],
     }
+    if punctual:
+        scene["lights"] = [{"type": "spot", "position": [0, 2.5, 0], "intensity": 4,
+                            "direction": [0, -1, 0], "innerAngle": 10, "outerAngle": 25},
+                           {"type": "point", "position": [-1.5, 1.2, 1.0], "intensity": 0.5}]
+    return scene
 
 
 # name: (description builder or scene file, resolution); the reference of every scene but the

@@ -78,8 +78,8 @@ def mitsuba_texture(spec, what, flip_v=True):
 
 
 def _material(m, flip_v=True):
-    if any(m.emission) or "emission" in m.textures:
-        raise NotExpressible(f"material {m.name}: emission")
+    if "emission" in m.textures or (any(m.emission) and m.two_sided):
+        raise NotExpressible(f"material {m.name}: a textured or two-sided emission")
     d = {"type": m.type, "albedo": list(m.albedo)}
     if m.type == "principled":
         d.update(m.numbers)
@@ -135,6 +135,11 @@ def mitsuba_dict(desc, spp=1, sampler="independent"):
         d[f"obj-{i}"] = {"type": kind, "filename": o.file, "face_normals": not o.smooth,
                          "to_world": T(np.asarray(o.matrix, float).tolist()),
                          "bsdf": {"type": "ref", "id": "mat-" + o.material}}
+        emission = desc.materials[o.material].emission
+        if any(emission):
+            # an area light on the front side, as ours (a one-sided emission)
+            d[f"obj-{i}"]["emitter"] = {"type": "area",
+                                        "radiance": {"type": "rgb", "value": list(emission)}}
     env = desc.environment
     if env is None:
         pass

@@ -311,6 +311,7 @@ class Features(NamedTuple):
     sobol: bool = False        # Owen-scrambled Sobol sampler (else independent)
     wrap_modes: bool = False   # a texture that mirrors or clamps (else all repeat)
     mipmaps: bool = False      # a mip-mapped (trilinear) texture: ray cones are traced
+    light_tree: bool = False   # lights picked by the light tree (else by power alone)
     # The principled parameters some material sets above 0 (or textures): the BSDF's parts
     # that need them are compiled only then (kernels.principled.Lobes). True by default:
     # a feature set built without them compiles the whole BSDF. dielectric: some principled
@@ -322,7 +323,6 @@ class Features(NamedTuple):
     flatness: bool = True      # the scene's "subsurface"
     spec_tint: bool = True
     anisotropic: bool = True
-    light_tree: bool = False   # lights picked by the light tree (else by power alone)
 
 
 class Specialisation(NamedTuple):
