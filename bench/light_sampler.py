@@ -22,11 +22,12 @@ import time
 
 import numpy as np
 
-from bench.common import (CORNELL, command, machine, mitsuba_pass_times, now, usable_mitsuba,
+from bench.common import (CORNELL, ROOT, command, machine, mitsuba_pass_times, now, usable_mitsuba,
                           versions)
 from bench.metrics import relmse
 
-SCENES = {"lamps": (192, 144), "lamps-area": (192, 144), "cornell-box": (256, 256)}
+SCENES = {"lamps": (192, 144), "lamps-area": (192, 144), "sun-spot": (192, 144),
+          "cornell-box": (256, 256)}
 REFERENCES = {}     # ours, by scene (Mitsuba's rows say how far its own is from ours)
 
 
@@ -35,11 +36,34 @@ def describe_scene(name, light_sampler, res):
     from bench.scenes import describe, lamps
     if name.startswith("lamps"):
         desc = describe(lamps(res, light_sampler, punctual=name == "lamps"))
+    elif name == "sun-spot":
+        desc = describe(sun_and_spot(res, light_sampler))
     else:
         desc = load_scene_description(CORNELL)
         desc.render.light_sampler = light_sampler
     desc.camera.resolution = res
     return desc
+
+
+def sun_and_spot(res, light_sampler):
+    """Two lights: a sun (a directional light) and a blue spot light whose pool lies beside
+    the sun's shadow of a ball; the spot lights its pool about as much as the sun does, but
+    by power the sun takes ~90 % of the light samples everywhere."""
+    plane = os.path.join(ROOT, "scenes", "assets", "plane.obj")
+    ball = os.path.join(ROOT, "scenes", "assets", "sphere.obj")
+    return {
+        "camera": {"resolution": list(res), "position": [0, 6, 9], "lookAt": [0, 0, 0],
+                   "fov": 50},
+        "render": {"maxBounces": 4, "lightSampler": light_sampler},
+        "materials": [{"name": "white", "type": "diffuse", "albedo": 0.7}],
+        "objects": [{"name": "floor", "file": plane, "material": "white",
+                     "transform": {"scale": [8, 1, 8]}},
+                    {"name": "ball", "file": ball, "material": "white", "smooth": True,
+                     "transform": {"scale": 0.8, "translate": [-1.5, 0.8, 0]}}],
+        "lights": [{"type": "directional", "direction": [0.5, -1, -0.3], "irradiance": 3},
+                   {"type": "spot", "position": [2.5, 3, 1], "intensity": [2, 4, 12],
+                    "direction": [0, -1, 0], "innerAngle": 15, "outerAngle": 30}],
+    }
 
 
 def render(backend, scene, spp, seed):

@@ -199,7 +199,8 @@ def build_parser():
                         "default: the scene's render.sampler (sobol)")
     p.add_argument("--light-sampler", choices=LIGHT_SAMPLERS,
                    help="how next-event estimation picks a light: tree (by what it can send "
-                        "to the shading point), power, or auto (the tree from 3 lights on); "
+                        "to the shading point), power, or auto (the tree from 3 lights on, or 2 "
+                        "with a point light); "
                         "default: the scene's render.lightSampler (auto)")
     p.add_argument("--exposure", type=_exposure, metavar="EV",
                    help="exposure of the PNG in stops (x 2^EV before the tone curve); "

@@ -190,6 +190,11 @@ def test_light_sampler_key(tmp_path):
     d["objects"] = d["objects"][:2]
     d["lights"] = []
     assert not load_scene(write_scene(tmp_path, d)).features.light_tree  # one quad lamp
+    spot_and_sun = [{"type": "spot", "position": [0, 3, 0], "intensity": 1,
+                     "direction": [0, -1, 0]},
+                    {"type": "directional", "direction": [1, -1, 0], "irradiance": 1}]
+    assert load_scene(write_scene(tmp_path, dict(d, objects=d["objects"][:1],
+                                                 lights=spot_and_sun))).features.light_tree
     d["render"]["lightSampler"] = "tree"
     assert load_scene(write_scene(tmp_path, d)).features.light_tree
     d["render"]["lightSampler"] = "bvh"

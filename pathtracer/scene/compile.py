@@ -151,7 +151,8 @@ def compile_scene(desc, use_cache=True, bvh_options=None, memo=None):
     lights = compile_lights(desc, tri, mat, tables.power, tri.shift)
     env = compile_environment(desc, has_lights=len(lights.light_ref_list) > 0, memo=memo)
     tree = None
-    if use_light_tree(desc.render.light_sampler, len(lights.light_ref_list)):
+    if use_light_tree(desc.render.light_sampler, len(lights.light_ref_list),
+                      lights.has_point_lights):
         tree = build_light_tree(lights.bounds)
     tri_light_pdf = triangle_light_pdfs(lights, tri, env.p_lights, tree is not None)
     lt_node, lt_link, tri_light_leaf = light_tree_arrays(tree, lights, tri)
@@ -764,18 +765,21 @@ class Lights(NamedTuple):
     bounds: LightBounds    # of light_ref's lights, for the light tree
 
 
-# render.lightSampler "auto" picks the light tree from this many lights on: one emissive
-# quad (two triangles) gains nothing from it, and it costs a few per cent of a path's time
+# render.lightSampler "auto" picks the light tree from this many lights on, or from two when
+# one of them is a point, spot or directional light: one emissive quad (two triangles)
+# gains nothing from it (its triangles share one box, normal and power: every pick is 1/2)
+# and the tree costs it 8 % of its paths/s (docs/benchmarks.md, "The light tree")
 LIGHT_TREE_MIN_LIGHTS = 3
 
 
-def use_light_tree(light_sampler, n_lights):
+def use_light_tree(light_sampler, n_lights, has_point_lights=False):
     """Whether the scene's lights are picked by the light tree (kernels.lights): "tree"
     always (with at least two lights to choose from), "power" never, "auto" from
-    LIGHT_TREE_MIN_LIGHTS lights on."""
+    LIGHT_TREE_MIN_LIGHTS lights on, or two with a point light among them."""
     if light_sampler == "power" or n_lights < 2:
         return False
-    return light_sampler == "tree" or n_lights >= LIGHT_TREE_MIN_LIGHTS
+    return (light_sampler == "tree" or n_lights >= LIGHT_TREE_MIN_LIGHTS or
+            has_point_lights)
 
 
 def geometry_sphere(tri):
