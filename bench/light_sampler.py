@@ -115,8 +115,8 @@ def main(argv=None):
                 times.append(time.perf_counter() - t)
             seconds = float(np.median(times))
             err = float(np.mean(errors))
-            row = {"scene": name, "renderer": "pt-render", "light_sampler": sampler, "resolution": list(res),
-                   "spp": args.spp, "relMSE": err,
+            row = {"scene": name, "renderer": "pt-render", "light_sampler": sampler,
+                   "resolution": list(res), "spp": args.spp, "relMSE": err,
                    "relMSE_stderr": float(np.std(errors, ddof=1) / np.sqrt(len(errors)))
                    if len(errors) > 1 else None,
                    "seconds": seconds, "times": times,

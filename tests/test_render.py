@@ -190,11 +190,14 @@ def test_spot_light_irradiance(tmp_path, backend):
             load_scene(write_scene(tmp_path, scene_dict, "bad.json"))
 
 
-def test_directional_light_irradiance(tmp_path):
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_directional_light_irradiance(tmp_path, backend):
     """A directional light of irradiance E at 60 degrees from a Lambertian plane's normal:
     L = a/pi E cos 60 everywhere (compiled as a point light 1,000 radii of the geometry
     away: within 0.2 % across it). Beside it a point lamp far from the plane still gets its
-    share of light samples (scene.compile.reaching_fraction), so its light is not noise."""
+    share of light samples, so its light is not noise: by power (as much as the power that
+    reaches the geometry, scene.compile.reaching_fraction) and with the light tree ("auto"
+    for two lights with a point light among them)."""
     albedo, e = 0.8, 2.0
     theta = np.radians(60.0)
     scene_dict = {
@@ -209,17 +212,20 @@ def test_directional_light_irradiance(tmp_path):
                     "irradiance": e}],
     }
     scene = load_scene(write_scene(tmp_path, scene_dict))
-    img = run(scene, "cpu", spp=4).film.image()
+    img = run(scene, backend, spp=4).film.image()
     want = albedo / np.pi * e * np.cos(theta)
     assert np.abs(img / want - 1).max() < 2e-3
     # with a lamp 20 above the plane (outside the geometry's sphere) the two add up (were
     # the far point light's whole power counted, the lamp would get ~1e-5 of the light
     # samples: its light would be missing at 64 spp)
     scene_dict["lights"].append({"type": "point", "position": [0, 0, 20], "intensity": 400})
-    both = run(load_scene(write_scene(tmp_path, scene_dict, "both.json")), "cpu",
-               spp=64).film.image()
     lamp = albedo / np.pi * 400 / 400        # a/pi I cos / d^2 at the centre (cos ~ 1)
-    assert np.allclose(both.mean(), want + lamp, rtol=0.02)
+    for sampler in ("power", "auto"):
+        scene_dict["render"]["lightSampler"] = sampler
+        both = load_scene(write_scene(tmp_path, scene_dict, f"both-{sampler}.json"))
+        assert both.features.light_tree == (sampler == "auto")
+        img = run(both, backend, spp=64).film.image()
+        assert np.allclose(img.mean(), want + lamp, rtol=0.02), sampler
     for bad, words in (({"type": "directional"}, "direction"),
                        ({"type": "directional", "direction": [0, 0, 0]}, "nonzero"),
                        ({"type": "directional", "direction": [0, 0, -1], "position": [0, 0, 1]},

@@ -84,18 +84,18 @@ def sin_sub_clamped(sin_a, cos_a, sin_b, cos_b):
 def light_importance(lt_node, n, p):
     """An upper bound, up to a common factor, of what the lights under node n can send to
     point p: power / distance^2 times the cosine of the smallest angle between the
-    direction to p and the normals' cone, widened by the angle the node's box subtends
-    (pbrt-v4, ``LightBounds::Importance``); 0 where p is outside every light's emission
-    (behind one-sided emitters, outside spot cones)."""
+    direction to p and the normals' cone, widened by the angle that the sphere around the
+    node's box subtends (pbrt-v4, ``LightBounds::Importance``); 0 where p is outside every
+    light's emission (behind one-sided emitters, outside spot cones)."""
     cx, cy, cz, r2 = load4(lt_node, n, LT_CENTRE)
     ax, ay, az, power = load4(lt_node, n, LT_AXIS)
     cos_o, sin_o, cos_e, two_sided = load4(lt_node, n, LT_COS_O)
     to = (p[0] - cx, p[1] - cy, p[2] - cz)
     d2 = dot(to, to)
     if not (d2 > r2):
-        # p inside the box's sphere: every direction may reach it
+        # p inside the node's sphere: every direction may reach it
         return power / max(r2, d2)
-    # the half-angle the box's sphere subtends from p
+    # the half-angle the node's sphere subtends from p
     sin2_b = r2 / d2
     cos_b = math.sqrt(ONE - sin2_b)
     sin_b = math.sqrt(sin2_b)

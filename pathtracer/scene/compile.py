@@ -30,7 +30,8 @@ from ..kernels.envmap import environment_tables
 from ..kernels.layout import (CAM_CONE, CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_LENS_Y, CAM_ORIGIN,
                               CAM_RIGHT,
                               CAM_SIZE, CAM_UP, ENV_COS_ROT, ENV_INFO_SIZE, ENV_P_SELECT,
-                              ENV_SIN_ROT, FILTER_BILINEAR, LT_LINK_WIDTH, LT_WIDTH, FILTER_NEAREST, FILTER_TRILINEAR,
+                              ENV_SIN_ROT, FILTER_BILINEAR, FILTER_NEAREST, FILTER_TRILINEAR,
+                              LT_LINK_WIDTH, LT_WIDTH,
                               M_ALBEDO, M_ANISOTROPIC, M_EMISSION, M_ETA, M_TWO_SIDED, M_TYPE,
                               MAT_DIFFUSE, MAT_PRINCIPLED, MAT_WIDTH, MATERIAL_PARAMS, N_SLOTS,
                               NO_TEXTURE, PL_AXIS, PL_CONE_OFFSET, PL_CONE_SCALE, PL_INTENSITY,
@@ -849,7 +850,7 @@ def compile_lights(desc, tri, mat, mat_power, shift):
     sphere = geometry_sphere(tri) if (desc.point_lights or suns) else None
     point_list = list(desc.point_lights) + place_suns(suns, sphere, shift)
     weights, refs = [], []
-    bounds = []           # LightBounds' fields per light (lo, hi, axis, cos_o, cos_e, power, 2-sided)
+    bounds = []           # LightBounds' seven fields, for the triangles and the point lights
     if tri.n:
         two_sided = np.where(mat[:, M_TWO_SIDED] > 0, 2, 1)
         mat_pow = np.asarray(mat_power, np.float64) * two_sided
@@ -943,7 +944,7 @@ def light_tree_arrays(tree, lights, tri):
     return tree.node, tree.link, tri_light_leaf
 
 
-def triangle_light_pdfs(lights, tri, p_lights, tree=False):
+def triangle_light_pdfs(lights, tri, p_lights, with_tree=False):
     """Each triangle's selection probability (times p_lights, the chance that a light
     rather than the environment is sampled) over its area: the area density with which
     next-event estimation samples it, 0 for triangles that do not emit. With the light
@@ -952,7 +953,7 @@ def triangle_light_pdfs(lights, tri, p_lights, tree=False):
     tri_light_pdf = np.zeros(max(1, tri.n), np.float32)
     for k, ref in enumerate(lights.light_ref_list):
         if ref >= 0:
-            pmf = 1.0 if tree else (float(lights.light_cdf[k + 1]) -
-                                    float(lights.light_cdf[k]))
+            pmf = 1.0 if with_tree else (float(lights.light_cdf[k + 1]) -
+                                         float(lights.light_cdf[k]))
             tri_light_pdf[ref] = pmf * p_lights / tri.area[ref]
     return tri_light_pdf
