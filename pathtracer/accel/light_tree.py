@@ -140,10 +140,15 @@ def _cost(acc, kr):
     return acc[11] * _orientation_measure(acc[9], acc[10]) * kr * _area(acc[0:3], acc[3:6])
 
 
+# a light's row of the build's working array (rows are swapped as lights are partitioned,
+# so that every pass over a node's lights reads memory in order)
+D_LO, D_HI, D_CENTRE, D_AXIS, D_COS_O, D_COS_E, D_POWER, D_TWO_SIDED, D_WIDTH = (
+    0, 3, 6, 9, 12, 13, 14, 15, 16)
+
+
 @njit(cache=jit_cache())
-def _bin_lights(order, start, end, centre, lo, hi, axis, cos_o, cos_e, power, two_sided, dim,
-                c_lo, extent, bins):
-    """Each bin's bounds (rows as _merge's) over the lights order[start:end] binned by their
+def _bin_lights(data, start, end, dim, c_lo, extent, bins):
+    """Each bin's bounds (rows as _merge's) over the lights data[start:end] binned by their
     centres on axis dim. A bin's cone is the power-weighted mean normal widened to hold
     every light's cone: not the smallest cone (pbrt-v4 unions cones light by light), but it
     holds them all and costs a dot product per light instead of inverse trigonometry; it
@@ -152,21 +157,21 @@ def _bin_lights(order, start, end, centre, lo, hi, axis, cos_o, cos_e, power, tw
     bins[:, 9] = 1.0
     bins[:, 10] = 1.0
     for i in range(start, end):
-        k = order[i]
-        b = min(N_BINS - 1, int(N_BINS * (centre[k, dim] - c_lo) / extent))
+        b = min(N_BINS - 1, int(N_BINS * (data[i, D_CENTRE + dim] - c_lo) / extent))
         if bins[b, 11] <= 0:
             for c in range(3):
-                bins[b, c] = lo[k, c]
-                bins[b, 3 + c] = hi[k, c]
+                bins[b, c] = data[i, D_LO + c]
+                bins[b, 3 + c] = data[i, D_HI + c]
         else:
             for c in range(3):
-                bins[b, c] = min(bins[b, c], lo[k, c])
-                bins[b, 3 + c] = max(bins[b, 3 + c], hi[k, c])
-        bins[b, 11] += power[k]
+                bins[b, c] = min(bins[b, c], data[i, D_LO + c])
+                bins[b, 3 + c] = max(bins[b, 3 + c], data[i, D_HI + c])
+        power = data[i, D_POWER]
+        bins[b, 11] += power
         for c in range(3):
-            bins[b, 6 + c] += power[k] * axis[k, c]
-        bins[b, 10] = min(bins[b, 10], cos_e[k])
-        if two_sided[k]:
+            bins[b, 6 + c] += power * data[i, D_AXIS + c]
+        bins[b, 10] = min(bins[b, 10], data[i, D_COS_E])
+        if data[i, D_TWO_SIDED] > 0:
             bins[b, 12] = 1.0
     for b in range(N_BINS):
         n = math.sqrt(bins[b, 6] ** 2 + bins[b, 7] ** 2 + bins[b, 8] ** 2)
@@ -179,12 +184,13 @@ def _bin_lights(order, start, end, centre, lo, hi, axis, cos_o, cos_e, power, tw
             bins[b, 8] = 1.0
             bins[b, 9] = -1.0
     for i in range(start, end):
-        k = order[i]
-        b = min(N_BINS - 1, int(N_BINS * (centre[k, dim] - c_lo) / extent))
-        d = bins[b, 6] * axis[k, 0] + bins[b, 7] * axis[k, 1] + bins[b, 8] * axis[k, 2]
-        if cos_o[k] < 1.0:
+        b = min(N_BINS - 1, int(N_BINS * (data[i, D_CENTRE + dim] - c_lo) / extent))
+        d = (bins[b, 6] * data[i, D_AXIS] + bins[b, 7] * data[i, D_AXIS + 1] +
+             bins[b, 8] * data[i, D_AXIS + 2])
+        cos_o = data[i, D_COS_O]
+        if cos_o < 1.0:
             d = math.cos(min(math.pi, math.acos(min(max(d, -1.0), 1.0)) +
-                             math.acos(max(cos_o[k], -1.0))))
+                             math.acos(max(cos_o, -1.0))))
         bins[b, 9] = min(bins[b, 9], d)
 
 
@@ -192,7 +198,21 @@ def _bin_lights(order, start, end, centre, lo, hi, axis, cos_o, cos_e, power, tw
 def _build(lo, hi, axis, cos_o, cos_e, power, two_sided, node, link, leaf):
     k_lights = lo.shape[0]
     order = np.arange(k_lights)
-    centre = (lo + hi) * 0.5
+    data = np.empty((k_lights, D_WIDTH))
+    for k in range(k_lights):
+        for c in range(3):
+            data[k, D_LO + c] = lo[k, c]
+            data[k, D_HI + c] = hi[k, c]
+            data[k, D_CENTRE + c] = (lo[k, c] + hi[k, c]) * 0.5
+            data[k, D_AXIS + c] = axis[k, c]
+        data[k, D_COS_O] = cos_o[k]
+        data[k, D_COS_E] = cos_e[k]
+        data[k, D_POWER] = power[k]
+        data[k, D_TWO_SIDED] = 1.0 if two_sided[k] else 0.0
+    blo = np.empty(3)
+    bhi = np.empty(3)
+    clo = np.empty(3)
+    chi = np.empty(3)
     # tasks: (node, start, end, parent, depth)
     stack = np.empty((max(1, k_lights), 5), np.int64)
     stack[0, 0] = 0
@@ -206,7 +226,6 @@ def _build(lo, hi, axis, cos_o, cos_e, power, two_sided, node, link, leaf):
     bins = np.zeros((N_BINS, 13))
     left = np.zeros((N_BINS, 13))
     acc = np.zeros(13)
-    bin_of = np.empty(k_lights, np.int64)
     while top > 0:
         top -= 1
         n = stack[top, 0]
@@ -223,17 +242,16 @@ def _build(lo, hi, axis, cos_o, cos_e, power, two_sided, node, link, leaf):
             leaf[k] = n
             continue
         # the node's box and its centroids' box
-        blo = np.full(3, np.inf)
-        bhi = np.full(3, -np.inf)
-        clo = np.full(3, np.inf)
-        chi = np.full(3, -np.inf)
+        blo[:] = np.inf
+        bhi[:] = -np.inf
+        clo[:] = np.inf
+        chi[:] = -np.inf
         for i in range(start, end):
-            k = order[i]
             for c in range(3):
-                blo[c] = min(blo[c], lo[k, c])
-                bhi[c] = max(bhi[c], hi[k, c])
-                clo[c] = min(clo[c], centre[k, c])
-                chi[c] = max(chi[c], centre[k, c])
+                blo[c] = min(blo[c], data[i, D_LO + c])
+                bhi[c] = max(bhi[c], data[i, D_HI + c])
+                clo[c] = min(clo[c], data[i, D_CENTRE + c])
+                chi[c] = max(chi[c], data[i, D_CENTRE + c])
         diag_max = max(bhi[0] - blo[0], max(bhi[1] - blo[1], bhi[2] - blo[2]))
         best_cost = np.inf
         best_dim = -1
@@ -248,8 +266,7 @@ def _build(lo, hi, axis, cos_o, cos_e, power, two_sided, node, link, leaf):
                 continue
             if end - start <= SMALL_NODE and dim != widest:
                 continue    # (small nodes: the centres' widest axis only; most nodes are small)
-            _bin_lights(order, start, end, centre, lo, hi, axis, cos_o, cos_e, power,
-                        two_sided, dim, clo[dim], extent, bins)
+            _bin_lights(data, start, end, dim, clo[dim], extent, bins)
             edge = bhi[dim] - blo[dim]
             kr = diag_max / edge if edge > 0 else 1.0
             # prefix unions (bins 0..b), then suffix unions swept from the right
@@ -273,21 +290,20 @@ def _build(lo, hi, axis, cos_o, cos_e, power, two_sided, node, link, leaf):
         mid = start
         if best_dim >= 0:
             extent = chi[best_dim] - clo[best_dim]
-            for i in range(start, end):
-                k = order[i]
-                b = min(N_BINS - 1, int(N_BINS * (centre[k, best_dim] - clo[best_dim]) /
-                                        extent))
-                bin_of[i] = b
-            # partition: lights in bins <= best_bin first
+            # partition: lights in bins <= best_bin first (rows and order swapped alike)
             j = start
             for i in range(start, end):
-                if bin_of[i] <= best_bin:
-                    tmp = order[j]
-                    order[j] = order[i]
-                    order[i] = tmp
-                    tb = bin_of[j]
-                    bin_of[j] = bin_of[i]
-                    bin_of[i] = tb
+                b = min(N_BINS - 1, int(N_BINS * (data[i, D_CENTRE + best_dim] -
+                                                  clo[best_dim]) / extent))
+                if b <= best_bin:
+                    if i != j:
+                        tmp = order[j]
+                        order[j] = order[i]
+                        order[i] = tmp
+                        for c in range(D_WIDTH):
+                            t = data[j, c]
+                            data[j, c] = data[i, c]
+                            data[i, c] = t
                     j += 1
             mid = j
         if mid <= start or mid >= end:
