@@ -200,3 +200,20 @@ def test_light_sampler_key(tmp_path):
     d["render"]["lightSampler"] = "bvh"
     with pytest.raises(SceneError, match="lightSampler"):
         load_scene(write_scene(tmp_path, d))
+
+
+def test_coincident_lights_and_a_point_on_a_light():
+    """Ten point lights at one position: the tree still splits them (equal centres), and at
+    that very position, where their importance would be infinite, the picks' probabilities
+    stay finite and sum to 1."""
+    k = 10
+    pos = np.tile([1.0, 2.0, 3.0], (k, 1))
+    tree = build_light_tree(LightBounds(pos, pos, np.tile([0.0, 0.0, 1.0], (k, 1)),
+                                        -np.ones(k), np.zeros(k), np.arange(1.0, k + 1),
+                                        np.zeros(k, bool)))
+    assert tree.depth <= 5
+    for p in ((F32(0), F32(0), F32(0)), (F32(1), F32(2), F32(3))):
+        pmf = [light_tree_pmf(tree.node, tree.link, tree.leaf[i], p) for i in range(k)]
+        assert np.isfinite(pmf).all() and sum(pmf) == pytest.approx(1.0, abs=1e-5)
+        light, pick_pmf = sample_light_tree(tree.node, tree.link, p, F32(0.5))
+        assert 0 <= light < k and np.isfinite(pick_pmf)

@@ -20,6 +20,8 @@ BSDF-sampled hit on an emitter gets the density that next-event estimation used.
 """
 import math
 
+import numpy as np
+
 from .constants import HALF, ONE, ONE_MINUS_EPS, ZERO
 from .device import device
 from .layout import (LT_AXIS, LT_CENTRE, LT_COS_O, LT_LEFT, LT_PARENT, LT_RIGHT, TRI_E1,
@@ -64,6 +66,12 @@ def direction_to(p, q):
     return scale(to, ONE / dist) if dist > ZERO else to, dist
 
 
+# Importance divides by at least this squared distance: finite (the tree's powers sum to 1)
+# where a shading point coincides with a point light, whose importance is then 1e30 x its
+# power instead of infinite (which made the pick's probability NaN)
+MIN_DIST2 = np.float32(1e-30)
+
+
 @device
 def cos_sub_clamped(sin_a, cos_a, sin_b, cos_b):
     """cos(max(0, a - b)) for angles in [0, pi] given by their sines and cosines."""
@@ -94,7 +102,7 @@ def light_importance(lt_node, n, p):
     d2 = dot(to, to)
     if not (d2 > r2):
         # p inside the node's sphere: every direction may reach it
-        return power / max(r2, d2)
+        return power / max(max(r2, d2), MIN_DIST2)
     # the half-angle the node's sphere subtends from p
     sin2_b = r2 / d2
     cos_b = math.sqrt(ONE - sin2_b)
@@ -108,7 +116,7 @@ def light_importance(lt_node, n, p):
     cos_p = cos_sub_clamped(sin_x, cos_x, sin_b, cos_b)
     if cos_p <= cos_e:
         return ZERO
-    return power * cos_p / d2
+    return power * cos_p / max(d2, MIN_DIST2)
 
 
 @device
