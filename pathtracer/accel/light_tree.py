@@ -6,9 +6,19 @@ Conty Estevez and Kulla 2018, "Importance Sampling of Many Lights with Adaptive 
 Splitting", as pbrt-v4's ``BVHLightSampler`` builds it: each light's bounds are its box, the
 cone of its normals (half-angle theta_o around an axis), the widest angle theta_e its
 emission leaves a normal at, and its power; a node's bounds are their union; splits are
-chosen over 12 bins per axis by the surface area and orientation heuristic (SAOH: power x
-the orientation cone's measure x box area, with the node box's aspect ratio on the split
-axis). Each leaf holds one light. Host code compiled with ``@njit``.
+chosen over 12 bins per axis (below SMALL_NODE lights, on the centres' widest axis only) by
+the surface area and orientation heuristic (SAOH: power x the orientation cone's measure x
+box area, with the node box's aspect ratio on the split axis; a bin's cone is its lights'
+mean normal widened to hold them, see _bin_lights). Each leaf holds one light. Host code
+compiled with ``@njit``; the lights' bounds are rows of one array that the partition
+reorders, so that every pass over a node's lights reads memory in order.
+
+The bounds need not be tight for the renderer to be unbiased, only the same when a light
+is picked and when its pick's probability is asked for (kernels.lights): an emitting
+triangle that a too-narrow bound never picks at some point is still reached there by BSDF
+sampling, whose MIS weight is then 1. Only delta lights (point, spot) rely on the bound
+holding them, which the exact cone unions of the nodes do (up to float32 rounding of the
+cone's cosine at the very edge of the emission).
 """
 import math
 from typing import NamedTuple
