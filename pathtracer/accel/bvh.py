@@ -39,7 +39,8 @@ class BVH(NamedTuple):
 
 
 @njit(cache=jit_cache())
-def _area(lo, hi):
+def box_area(lo, hi):
+    """Surface area of the box lo..hi (0 for an empty or inverted one)."""
     dx = max(hi[0] - lo[0], 0.0)
     dy = max(hi[1] - lo[1], 0.0)
     dz = max(hi[2] - lo[2], 0.0)
@@ -139,7 +140,7 @@ def _run(t_lo, t_hi, order, tasks, task_box, n_tasks, box, child, n_bins, max_le
         best_cost = np.inf
         best_axis = -1
         best_bin = 0
-        parent_area = _area(lo, hi)
+        parent_area = box_area(lo, hi)
         binned = False
         if count >= min_leaf_split and depth < MAX_DEPTH:
             binned = True
@@ -192,7 +193,7 @@ def _run(t_lo, t_hi, order, tasks, task_box, n_tasks, box, child, n_bins, max_le
                         for c in range(3):
                             acc_lo[c] = min(acc_lo[c], bin_lo[a, b, c])
                             acc_hi[c] = max(acc_hi[c], bin_hi[a, b, c])
-                        right_a = _area(acc_lo, acc_hi)
+                        right_a = box_area(acc_lo, acc_hi)
                     right_n[b] = acc_n
                     right_area[b] = right_a
                 # Prefix sweep; boundary b splits bins < b from bins >= b.
@@ -207,7 +208,7 @@ def _run(t_lo, t_hi, order, tasks, task_box, n_tasks, box, child, n_bins, max_le
                         for c in range(3):
                             acc_lo[c] = min(acc_lo[c], bin_lo[a, b - 1, c])
                             acc_hi[c] = max(acc_hi[c], bin_hi[a, b - 1, c])
-                        left_a = _area(acc_lo, acc_hi)
+                        left_a = box_area(acc_lo, acc_hi)
                     if acc_n == 0 or right_n[b] == 0:
                         continue
                     cost = acc_n * left_a + right_n[b] * right_area[b]
@@ -524,7 +525,7 @@ def _build_plain(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split, mid
         best_cost = np.inf
         best_axis = -1
         best_bin = 0
-        parent_area = _area(lo, hi)
+        parent_area = box_area(lo, hi)
         if count >= min_leaf_split and depth < MAX_DEPTH:
             for a in range(3):
                 for b in range(n_bins):
@@ -557,7 +558,7 @@ def _build_plain(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split, mid
                         acc_lo[c] = min(acc_lo[c], bin_lo[a, b, c])
                         acc_hi[c] = max(acc_hi[c], bin_hi[a, b, c])
                     right_n[b] = acc_n
-                    right_area[b] = _area(acc_lo, acc_hi) if acc_n > 0 else 0.0
+                    right_area[b] = box_area(acc_lo, acc_hi) if acc_n > 0 else 0.0
                 # Prefix sweep; boundary b splits bins < b from bins >= b.
                 for c in range(3):
                     acc_lo[c] = np.inf
@@ -570,7 +571,7 @@ def _build_plain(tri_lo, tri_hi, centroid, n_bins, max_leaf, min_leaf_split, mid
                         acc_hi[c] = max(acc_hi[c], bin_hi[a, b - 1, c])
                     if acc_n == 0 or right_n[b] == 0:
                         continue
-                    cost = acc_n * _area(acc_lo, acc_hi) + right_n[b] * right_area[b]
+                    cost = acc_n * box_area(acc_lo, acc_hi) + right_n[b] * right_area[b]
                     if cost < best_cost:
                         best_cost = cost
                         best_axis = a

@@ -27,12 +27,16 @@ import numpy as np
 from numba import njit
 
 from .._cache import jit_cache
+from .bvh import box_area
 from ..kernels.layout import (LT_AXIS, LT_CENTRE, LT_COS_E, LT_COS_O, LT_LEFT, LT_LINK_WIDTH,
                               LT_PARENT, LT_POWER, LT_RADIUS2, LT_RIGHT, LT_SIN_O, LT_TWO_SIDED,
                               LT_WIDTH)
 
 N_BINS = 12
 SMALL_NODE = 64
+# a bounds row of the build (float64; _merge): box, cone axis and half-angle cosine, widest
+# emission angle cosine, power (0: empty), two-sided (1.0 or 0.0)
+R_LO, R_HI, R_AXIS, R_COS_O, R_COS_E, R_POWER, R_TWO_SIDED, R_WIDTH = 0, 3, 6, 9, 10, 11, 12, 13
 
 
 class LightBounds(NamedTuple):
@@ -108,46 +112,45 @@ def _orientation_measure(cos_o, cos_e):
 
 
 @njit(cache=jit_cache())
-def _area(lo, hi):
-    dx = max(hi[0] - lo[0], 0.0)
-    dy = max(hi[1] - lo[1], 0.0)
-    dz = max(hi[2] - lo[2], 0.0)
-    return 2 * (dx * dy + dy * dz + dz * dx)
+def _merge(acc, lo, hi, w, cos_o, cos_e, power, two_sided):
+    """acc (a bounds row, R_*) grown by one set of bounds, in place."""
+    if acc[R_POWER] <= 0:
+        for c in range(3):
+            acc[R_LO + c] = lo[c]
+            acc[R_HI + c] = hi[c]
+            acc[R_AXIS + c] = w[c]
+        acc[R_COS_O] = cos_o
+        acc[R_COS_E] = cos_e
+        acc[R_POWER] = power
+        acc[R_TWO_SIDED] = 1.0 if two_sided else 0.0
+        return
+    for c in range(3):
+        acc[R_LO + c] = min(acc[R_LO + c], lo[c])
+        acc[R_HI + c] = max(acc[R_HI + c], hi[c])
+    axis, cos_u = _cone_union((acc[R_AXIS], acc[R_AXIS + 1], acc[R_AXIS + 2]), acc[R_COS_O],
+                              (w[0], w[1], w[2]), cos_o)
+    for c in range(3):
+        acc[R_AXIS + c] = axis[c]
+    acc[R_COS_O] = cos_u
+    acc[R_COS_E] = min(acc[R_COS_E], cos_e)
+    acc[R_POWER] += power
+    if two_sided:
+        acc[R_TWO_SIDED] = 1.0
 
 
 @njit(cache=jit_cache())
-def _merge(acc, lo, hi, w, cos_o, cos_e, power, two_sided):
-    """acc (a float64 row: lo 0-2, hi 3-5, axis 6-8, cos_o 9, cos_e 10, power 11,
-    two-sided 12; power 0 = empty) grown by one set of bounds, in place."""
-    if acc[11] <= 0:
-        for c in range(3):
-            acc[c] = lo[c]
-            acc[3 + c] = hi[c]
-            acc[6 + c] = w[c]
-        acc[9] = cos_o
-        acc[10] = cos_e
-        acc[11] = power
-        acc[12] = 1.0 if two_sided else 0.0
-        return
-    for c in range(3):
-        acc[c] = min(acc[c], lo[c])
-        acc[3 + c] = max(acc[3 + c], hi[c])
-    axis, cos_u = _cone_union((acc[6], acc[7], acc[8]), acc[9], (w[0], w[1], w[2]), cos_o)
-    acc[6] = axis[0]
-    acc[7] = axis[1]
-    acc[8] = axis[2]
-    acc[9] = cos_u
-    acc[10] = min(acc[10], cos_e)
-    acc[11] += power
-    if two_sided:
-        acc[12] = 1.0
+def _merge_row(acc, row):
+    """acc grown by another bounds row (a non-empty one), in place."""
+    _merge(acc, row[R_LO:R_LO + 3], row[R_HI:R_HI + 3], row[R_AXIS:R_AXIS + 3], row[R_COS_O],
+           row[R_COS_E], row[R_POWER], row[R_TWO_SIDED] > 0)
 
 
 @njit(cache=jit_cache())
 def _cost(acc, kr):
-    if acc[11] <= 0:
+    if acc[R_POWER] <= 0:
         return 0.0
-    return acc[11] * _orientation_measure(acc[9], acc[10]) * kr * _area(acc[0:3], acc[3:6])
+    return (acc[R_POWER] * _orientation_measure(acc[R_COS_O], acc[R_COS_E]) * kr *
+            box_area(acc[R_LO:R_LO + 3], acc[R_HI:R_HI + 3]))
 
 
 # a light's row of the build's working array (rows are swapped as lights are partitioned,
@@ -164,44 +167,57 @@ def _bin_lights(data, start, end, dim, c_lo, extent, bins):
     holds them all and costs a dot product per light instead of inverse trigonometry; it
     only weighs the split (the tree's own nodes get exact unions)."""
     bins[:, :] = 0.0
-    bins[:, 9] = 1.0
-    bins[:, 10] = 1.0
+    bins[:, R_COS_O] = 1.0
+    bins[:, R_COS_E] = 1.0
     for i in range(start, end):
         b = min(N_BINS - 1, int(N_BINS * (data[i, D_CENTRE + dim] - c_lo) / extent))
-        if bins[b, 11] <= 0:
+        if bins[b, R_POWER] <= 0:
             for c in range(3):
-                bins[b, c] = data[i, D_LO + c]
-                bins[b, 3 + c] = data[i, D_HI + c]
+                bins[b, R_LO + c] = data[i, D_LO + c]
+                bins[b, R_HI + c] = data[i, D_HI + c]
         else:
             for c in range(3):
-                bins[b, c] = min(bins[b, c], data[i, D_LO + c])
-                bins[b, 3 + c] = max(bins[b, 3 + c], data[i, D_HI + c])
+                bins[b, R_LO + c] = min(bins[b, R_LO + c], data[i, D_LO + c])
+                bins[b, R_HI + c] = max(bins[b, R_HI + c], data[i, D_HI + c])
         power = data[i, D_POWER]
-        bins[b, 11] += power
+        bins[b, R_POWER] += power
         for c in range(3):
-            bins[b, 6 + c] += power * data[i, D_AXIS + c]
-        bins[b, 10] = min(bins[b, 10], data[i, D_COS_E])
+            bins[b, R_AXIS + c] += power * data[i, D_AXIS + c]
+        bins[b, R_COS_E] = min(bins[b, R_COS_E], data[i, D_COS_E])
         if data[i, D_TWO_SIDED] > 0:
-            bins[b, 12] = 1.0
+            bins[b, R_TWO_SIDED] = 1.0
     for b in range(N_BINS):
-        n = math.sqrt(bins[b, 6] ** 2 + bins[b, 7] ** 2 + bins[b, 8] ** 2)
-        if n > 1e-12 * bins[b, 11]:
+        n = math.sqrt(bins[b, R_AXIS] ** 2 + bins[b, R_AXIS + 1] ** 2 +
+                      bins[b, R_AXIS + 2] ** 2)
+        if n > 1e-12 * bins[b, R_POWER]:
             for c in range(3):
-                bins[b, 6 + c] /= n
+                bins[b, R_AXIS + c] /= n
         else:
-            bins[b, 6] = 0.0
-            bins[b, 7] = 0.0
-            bins[b, 8] = 1.0
-            bins[b, 9] = -1.0
+            bins[b, R_AXIS] = 0.0
+            bins[b, R_AXIS + 1] = 0.0
+            bins[b, R_AXIS + 2] = 1.0
+            bins[b, R_COS_O] = -1.0
     for i in range(start, end):
         b = min(N_BINS - 1, int(N_BINS * (data[i, D_CENTRE + dim] - c_lo) / extent))
-        d = (bins[b, 6] * data[i, D_AXIS] + bins[b, 7] * data[i, D_AXIS + 1] +
-             bins[b, 8] * data[i, D_AXIS + 2])
+        d = (bins[b, R_AXIS] * data[i, D_AXIS] + bins[b, R_AXIS + 1] * data[i, D_AXIS + 1] +
+             bins[b, R_AXIS + 2] * data[i, D_AXIS + 2])
         cos_o = data[i, D_COS_O]
         if cos_o < 1.0:
             d = math.cos(min(math.pi, math.acos(min(max(d, -1.0), 1.0)) +
                              math.acos(max(cos_o, -1.0))))
-        bins[b, 9] = min(bins[b, 9], d)
+        bins[b, R_COS_O] = min(bins[b, R_COS_O], d)
+
+
+@njit(cache=jit_cache())
+def _push(stack, top, node, start, end, parent, level):
+    """The build's task (node over lights start..end-1, its parent, its depth) put on the
+    stack at top; returns the new top."""
+    stack[top, 0] = node
+    stack[top, 1] = start
+    stack[top, 2] = end
+    stack[top, 3] = parent
+    stack[top, 4] = level
+    return top + 1
 
 
 @njit(cache=jit_cache())
@@ -225,17 +241,12 @@ def _build(lo, hi, axis, cos_o, cos_e, power, two_sided, node, link, leaf):
     chi = np.empty(3)
     # tasks: (node, start, end, parent, depth)
     stack = np.empty((max(1, k_lights), 5), np.int64)
-    stack[0, 0] = 0
-    stack[0, 1] = 0
-    stack[0, 2] = k_lights
-    stack[0, 3] = -1
-    stack[0, 4] = 1
-    top = 1
+    top = _push(stack, 0, 0, 0, k_lights, -1, 1)
     next_node = 1
     depth = 1
-    bins = np.zeros((N_BINS, 13))
-    left = np.zeros((N_BINS, 13))
-    acc = np.zeros(13)
+    bins = np.zeros((N_BINS, R_WIDTH))
+    left = np.zeros((N_BINS, R_WIDTH))
+    acc = np.zeros(R_WIDTH)
     while top > 0:
         top -= 1
         n = stack[top, 0]
@@ -282,16 +293,14 @@ def _build(lo, hi, axis, cos_o, cos_e, power, two_sided, node, link, leaf):
             # prefix unions (bins 0..b), then suffix unions swept from the right
             acc[:] = 0.0
             for b in range(N_BINS - 1):
-                if bins[b, 11] > 0:
-                    _merge(acc, bins[b, 0:3], bins[b, 3:6], bins[b, 6:9], bins[b, 9],
-                           bins[b, 10], bins[b, 11], bins[b, 12] > 0)
+                if bins[b, R_POWER] > 0:
+                    _merge_row(acc, bins[b])
                 left[b, :] = acc
             acc[:] = 0.0
             for b in range(N_BINS - 1, 0, -1):
-                if bins[b, 11] > 0:
-                    _merge(acc, bins[b, 0:3], bins[b, 3:6], bins[b, 6:9], bins[b, 9],
-                           bins[b, 10], bins[b, 11], bins[b, 12] > 0)
-                if acc[11] > 0 and left[b - 1, 11] > 0:
+                if bins[b, R_POWER] > 0:
+                    _merge_row(acc, bins[b])
+                if acc[R_POWER] > 0 and left[b - 1, R_POWER] > 0:
                     cost = _cost(left[b - 1], kr) + _cost(acc, kr)
                     if cost < best_cost:
                         best_cost = cost
@@ -323,20 +332,10 @@ def _build(lo, hi, axis, cos_o, cos_e, power, two_sided, node, link, leaf):
         next_node += 2
         link[n, LT_LEFT] = c0
         link[n, LT_RIGHT] = c1
-        stack[top, 0] = c1
-        stack[top, 1] = mid
-        stack[top, 2] = end
-        stack[top, 3] = n
-        stack[top, 4] = level + 1
-        top += 1
-        stack[top, 0] = c0
-        stack[top, 1] = start
-        stack[top, 2] = mid
-        stack[top, 3] = n
-        stack[top, 4] = level + 1
-        top += 1
+        top = _push(stack, top, c1, mid, end, n, level + 1)
+        top = _push(stack, top, c0, start, mid, n, level + 1)
     # bounds bottom-up: children are numbered after their parents
-    rows = np.zeros((next_node, 13))
+    rows = np.zeros((next_node, R_WIDTH))
     for n in range(next_node - 1, -1, -1):
         first = link[n, LT_LEFT]
         if first < 0:
@@ -346,21 +345,20 @@ def _build(lo, hi, axis, cos_o, cos_e, power, two_sided, node, link, leaf):
         else:
             for side in range(2):
                 c = link[n, LT_LEFT + side * (LT_RIGHT - LT_LEFT)]
-                _merge(rows[n], rows[c, 0:3], rows[c, 3:6], rows[c, 6:9], rows[c, 9],
-                       rows[c, 10], rows[c, 11], rows[c, 12] > 0)
+                _merge_row(rows[n], rows[c])
     for n in range(next_node):
         r2 = 0.0
         for c in range(3):
-            node[n, LT_CENTRE + c] = (rows[n, c] + rows[n, 3 + c]) / 2
-            r2 += ((rows[n, 3 + c] - rows[n, c]) / 2) ** 2
-            node[n, LT_AXIS + c] = rows[n, 6 + c]
+            node[n, LT_CENTRE + c] = (rows[n, R_LO + c] + rows[n, R_HI + c]) / 2
+            r2 += ((rows[n, R_HI + c] - rows[n, R_LO + c]) / 2) ** 2
+            node[n, LT_AXIS + c] = rows[n, R_AXIS + c]
         # (rounded up, so that the float32 sphere still holds the box)
         node[n, LT_RADIUS2] = r2 * (1 + 1e-6)
-        node[n, LT_COS_O] = rows[n, 9]
-        node[n, LT_SIN_O] = math.sqrt(max(0.0, 1.0 - rows[n, 9] * rows[n, 9]))
-        node[n, LT_COS_E] = rows[n, 10]
-        node[n, LT_POWER] = rows[n, 11]
-        node[n, LT_TWO_SIDED] = rows[n, 12]
+        node[n, LT_COS_O] = rows[n, R_COS_O]
+        node[n, LT_SIN_O] = math.sqrt(max(0.0, 1.0 - rows[n, R_COS_O] * rows[n, R_COS_O]))
+        node[n, LT_COS_E] = rows[n, R_COS_E]
+        node[n, LT_POWER] = rows[n, R_POWER]
+        node[n, LT_TWO_SIDED] = rows[n, R_TWO_SIDED]
     return next_node, depth
 
 
