@@ -271,15 +271,21 @@ def test_cpu_profile_annotates_instructions(capsys):
 
 
 def test_watertight_counts_rays_that_slip_through():
-    """bench.watertight: rays aimed at a closed sphere's edges from outside all cross it;
-    the counts are the cracks of the ray-triangle test. The four-wide tree runs the
-    binary tree's test bit for bit, so both lose the same rays; rays aimed at triangle
-    interiors never slip through."""
-    from bench.watertight import CASES, edge_rays, measure, sphere, trace
+    """bench.watertight: rays aimed at a closed sphere's edges from outside, those that
+    clearly cross it (not grazing its silhouette: 84 % of those drawn here), and rays aimed
+    at a split quad's diagonal; the counts are the cracks of the ray-triangle test. The
+    four-wide tree runs the binary tree's test bit for bit, so both lose the same rays;
+    rays aimed at triangle interiors never slip through."""
+    from bench.watertight import (CASES, QUAD_CASES, edge_rays, measure, measure_quads,
+                                  sphere, trace)
     rec = measure(cases=CASES[:1], rays=20000, seed=3)[0]
+    assert 0.6 * rec["rays_drawn"] < rec["rays"] < 0.95 * rec["rays_drawn"]
     assert rec["binary_missed"] == rec["wide_missed"]
     assert rec["binary_unoccluded"] == rec["wide_unoccluded"]
     assert 0 <= rec["binary_missed"] <= rec["rays"]
+    for rec in measure_quads(cases=QUAD_CASES[:2], rays=5000, seed=3):
+        assert rec["binary_missed"] == rec["wide_missed"] <= rec["rays"]
+        assert rec["binary_unoccluded"] == rec["wide_unoccluded"]
     # interiors: the same rays moved to triangle centres hit every time
     v, f, tri_v, bvh = sphere(*CASES[0][:4])
     rng = np.random.default_rng(5)
