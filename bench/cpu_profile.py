@@ -242,7 +242,7 @@ def main(argv=None):
     p.add_argument("--json")
     p.add_argument("--annotate", metavar="FUNCTION",
                    help="also print this function's instructions with their sample shares "
-                        "(a name as the table prints it, e.g. envmap.env_sample_uv)")
+                        "(a name as the table prints it, e.g. envmap.env_sample_lit)")
     p.add_argument("--annotate-min", type=float, default=0.002,
                    help="share of the kernel's samples from which --annotate shows an "
                         "instruction (default 0.002)")

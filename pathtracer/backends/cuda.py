@@ -157,13 +157,13 @@ if not config.ENABLE_CUDASIM:
 
 
 def _aligned(d_scene):
-    """The device scene, after checking what kernels.loads' 128-bit loads of BVH nodes
-    need: 16-byte aligned rows (cuda.to_device allocates at 256-byte boundaries; a
-    misaligned vector load would fault)."""
+    """The device scene, after checking what kernels.loads' 128-bit loads of BVH nodes and
+    environment texels need: 16-byte aligned rows (cuda.to_device allocates at 256-byte
+    boundaries; a misaligned vector load would fault)."""
     if not config.ENABLE_CUDASIM:
-        for name in ("bvh_box", "bvh_child"):
+        for name, axis in (("bvh_box", 0), ("bvh_child", 0), ("env_img", 1)):
             a = getattr(d_scene, name)
-            if a.device_ctypes_pointer.value % 16 or (a.strides[0] % 16):
+            if a.device_ctypes_pointer.value % 16 or (a.strides[axis] % 16):
                 raise RuntimeError(f"pt-render: {name} on the GPU is not 16-byte aligned")
     return d_scene
 

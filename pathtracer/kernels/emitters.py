@@ -15,20 +15,20 @@ the irradiance term), ``is_delta`` whether MIS against BSDF sampling is impossib
 lights) and ``light_tri`` the light's triangle, which the shadow ray must not hit (-1 when
 none). ``pdf_light`` = 0 means no sample.
 
-The environment's radiance is left out of the record: its ``radiance`` holds the sample's
-map coordinates (u, v, 0) instead, and :func:`environment_radiance` looks the radiance up
-there once the shadow ray found the sky visible, because that lookup for every occluded
-sample cost 12% on an H100 in the bunny-studio scene; at (u, v) it needs no inverse
-trigonometry (as Mitsuba's envmap evaluates its sample). The other kinds' radiance is a
-table lookup, cheaper done at once than carrying what it needs (material, texture
-coordinates) past the shadow ray.
+The environment's radiance comes with its sample: the map's texels hold radiance and
+sampling density side by side (kernels.envmap), so the four texels that the sample's density
+is read from give the radiance at the sampled point too, without the inverse trigonometry
+of a lookup by direction (as Mitsuba's envmap evaluates its sample). (Until 2026-11-27 the
+record carried the sample's map coordinates and the radiance was looked up after the shadow
+ray, from an image apart from the densities: a second lookup, which for every occluded
+sample had cost 12 % on an H100.)
 """
 import functools
 from typing import NamedTuple
 
 from .constants import INF, ONE, ONE_MINUS_EPS, SHADOW_SHORTEN, ZERO
 from .device import device, step_marker
-from .envmap import env_eval_uv, env_lookup, env_sample_uv
+from .envmap import env_lookup, env_sample_lit
 from .layout import (ENV_P_SELECT, PL_AXIS, PL_CONE_OFFSET, PL_CONE_SCALE, PL_INTENSITY,
                      PL_POSITION, point_light_index, specialise)
 from .lights import (direction_to, light_tree_pmf, sample_discrete, sample_light_tree,
@@ -54,7 +54,6 @@ def mis_weight_hit(pdf_prev, pdf_light):
 
 class EmitterSteps(NamedTuple):
     sample_emitter: object
-    environment_radiance: object
     hit_emission: object
     escaped: object
 
@@ -76,12 +75,11 @@ def make_emitters(features, target="cpu"):
     emitted = surface.emitted
 
     @step
-    def sample_environment(env_marg, env_cond, env_pdf_arr, env_info, u1, u2):
-        wi, pdf_dir, u, v = env_sample_uv(env_marg, env_cond, env_pdf_arr, env_info, u1, u2)
+    def sample_environment(env_marg, env_cond, env_img, env_info, u1, u2):
+        wi, pdf_dir, le, _, _ = env_sample_lit(env_marg, env_cond, env_img, env_info, u1, u2)
         if not (pdf_dir > ZERO):
             return wi, INF, NO_RADIANCE, ZERO, False, -1
-        # (the radiance slot carries the map coordinates: see environment_radiance)
-        return wi, INF, (u, v, ZERO), env_info[ENV_P_SELECT] * pdf_dir, False, -1
+        return wi, INF, le, env_info[ENV_P_SELECT] * pdf_dir, False, -1
 
     @step
     def sample_triangle_light(tri_v, tri_mat, tri_uv, tri_light_pdf, mat, mat_tex, tex_data,
@@ -128,7 +126,7 @@ def make_emitters(features, target="cpu"):
         if ENV_MAP:
             p_env = scene.env_info[ENV_P_SELECT]
             if u_sel < p_env:
-                return sample_environment(scene.env_marg, scene.env_cond, scene.env_pdf,
+                return sample_environment(scene.env_marg, scene.env_cond, scene.env_img,
                                           scene.env_info, u1, u2)
             u_sel = min((u_sel - p_env) / (ONE - p_env), ONE_MINUS_EPS)
         if ANY_LIGHTS:
@@ -155,16 +153,6 @@ def make_emitters(features, target="cpu"):
         return (ZERO, ZERO, ONE), ZERO, NO_RADIANCE, ZERO, False, -1
 
     @step
-    def environment_radiance(env_img, env_info, wi, le, is_delta, light_tri):
-        """The record's radiance, with the environment's looked up now at the (u, v) its
-        record carries (see the module's docstring): a sample of neither a triangle nor a
-        point light is the environment's."""
-        if ENV_MAP:
-            if light_tri < 0 and not is_delta:
-                return env_eval_uv(env_img, le[0], le[1])
-        return le
-
-    @step
     def hit_emission(mat, mat_tex, tex_data, tex_int, tex_f, tri_light_pdf, lt_node, lt_link,
                      tri_light_leaf, tri, m, cos_o, o, t, pdf_prev, u, v, fp):
         """(emitted radiance, MIS weight, emits) of triangle tri (material m) reached at
@@ -187,15 +175,15 @@ def make_emitters(features, target="cpu"):
                 mis_weight_hit(pdf_prev, pdf_light), True)
 
     @step
-    def escaped(env, env_img, env_pdf_arr, env_info, d, pdf_prev):
+    def escaped(env, env_img, env_info, d, pdf_prev):
         """(radiance, MIS weight) of the environment seen by a ray leaving the scene along
         d. A constant environment is not sampled by next-event estimation: weight 1."""
         if ENV_MAP:
             # (the radiance and, for MIS, the density from one mapping of d to the map)
-            le, pdf_dir = env_lookup(env_img, env_pdf_arr, env_info, d, pdf_prev > ZERO)
+            le, pdf_dir = env_lookup(env_img, env_info, d, pdf_prev > ZERO)
             return le, mis_weight_hit(pdf_prev, env_info[ENV_P_SELECT] * pdf_dir)
         if ENVIRONMENT:
             return (env[0], env[1], env[2]), ONE
         return NO_RADIANCE, ZERO
 
-    return EmitterSteps(sample_emitter, environment_radiance, hit_emission, escaped)
+    return EmitterSteps(sample_emitter, hit_emission, escaped)

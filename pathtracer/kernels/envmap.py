@@ -19,11 +19,13 @@ Jacobian of the mapping (the thesis renderer used 2 pi sin theta, pi too large).
 the texel weights are max(luminance - mean, 0) x sin(theta) rather than luminance x
 sin(theta) (MIS compensation: see :func:`environment_tables`).
 
-Arrays: ``env_img`` (H, W, 3) radiance with the intensity applied; ``env_marg`` (H + 2,) the
-CDF over the H + 1 row cells; ``env_cond`` (H, W + 1) per texel row the unnormalised
-cumulative masses of its column cells (the last entry: the row's total); ``env_pdf`` (H, W)
-the density p(u, v) at each texel centre; ``env_info`` (see :mod:`.layout`): the rotation's
-cosine and sine and the probability that next-event estimation picks the environment.
+Arrays: ``env_img`` (H, W, 4) per texel the radiance (rgb, the intensity applied) and the
+density p(u, v) at its centre (layout ENV_DENSITY), so that a bilinear cell is four 16-byte
+loads and one load serves both the radiance and the density; ``env_marg`` (H + 2,) the CDF
+over the H + 1 row cells; ``env_cond`` (H, W + 1) per texel row the unnormalised cumulative
+masses of its column cells (the last entry: the row's total); ``env_info`` (see
+:mod:`.layout`): the rotation's cosine and sine and the probability that next-event
+estimation picks the environment.
 
 The device functions sample and evaluate these tables; :func:`environment_tables`, beside
 them, is the host code (NumPy) that builds them, so the two sides of the density stay
@@ -36,8 +38,9 @@ import numpy as np
 from .constants import HALF, LUM_B, LUM_G, LUM_R, ONE, PI, TWO_PI, ZERO
 from .device import device
 from .fmath import acos_f32, atan2_f32
-from .layout import ENV_COS_ROT, ENV_SIN_ROT
+from .layout import ENV_COS_ROT, ENV_DENSITY, ENV_SIN_ROT, ENV_TEXEL_WIDTH
 from .lights import sample_discrete
+from .loads import load4_texel
 from .textures import bilinear_blend, bilinear_cell
 from .warps import sincos
 
@@ -77,21 +80,26 @@ def env_cell(w, h, u, v):
 
 
 @device
-def radiance_in_cell(env_img, i0, i1, j0, j1, fx, fy):
-    """The bilinear blend of the four texels of an env_cell."""
-    return bilinear_blend(
-        (env_img[j0, i0, 0], env_img[j0, i0, 1], env_img[j0, i0, 2]),
-        (env_img[j0, i1, 0], env_img[j0, i1, 1], env_img[j0, i1, 2]),
-        (env_img[j1, i0, 0], env_img[j1, i0, 1], env_img[j1, i0, 2]),
-        (env_img[j1, i1, 0], env_img[j1, i1, 1], env_img[j1, i1, 2]), fx, fy)
+def cell_texels(env_img, i0, i1, j0, j1):
+    """The four texels (r, g, b, density) of an env_cell, a 16-byte load each."""
+    return (load4_texel(env_img, j0, i0), load4_texel(env_img, j0, i1),
+            load4_texel(env_img, j1, i0), load4_texel(env_img, j1, i1))
 
 
 @device
-def density_in_cell(env_pdf_arr, i0, i1, j0, j1, fx, fy, sin_t):
-    """The solid-angle density at a point of an env_cell whose direction has sin theta
-    sin_t > 0: the bilinear blend of the texel-centre densities over the Jacobian."""
-    a = env_pdf_arr[j0, i0] + fx * (env_pdf_arr[j0, i1] - env_pdf_arr[j0, i0])
-    b = env_pdf_arr[j1, i0] + fx * (env_pdf_arr[j1, i1] - env_pdf_arr[j1, i0])
+def radiance_in_cell(env_img, i0, i1, j0, j1, fx, fy):
+    """The bilinear blend of the radiance of the four texels of an env_cell."""
+    t00, t10, t01, t11 = cell_texels(env_img, i0, i1, j0, j1)
+    return bilinear_blend(t00, t10, t01, t11, fx, fy)
+
+
+@device
+def density_in_texels(t00, t10, t01, t11, fx, fy, sin_t):
+    """The solid-angle density at a point of an env_cell (its texels, fractions fx, fy)
+    whose direction has sin theta sin_t > 0: the bilinear blend of the texel-centre
+    densities over the Jacobian."""
+    a = t00[ENV_DENSITY] + fx * (t10[ENV_DENSITY] - t00[ENV_DENSITY])
+    b = t01[ENV_DENSITY] + fx * (t11[ENV_DENSITY] - t01[ENV_DENSITY])
     return (a + fy * (b - a)) / (TWO_PI_SQ * sin_t)
 
 
@@ -106,43 +114,27 @@ def env_eval(env_img, env_info, d):
 
 
 @device
-def env_eval_uv(env_img, u, v):
-    """Radiance at map coordinates (u, v): env_eval where the direction's coordinates
-    are known (an env_sample_uv sample), without the inverse trigonometry."""
-    h = env_img.shape[0]
-    w = env_img.shape[1]
-    i0, i1, j0, j1, fx, fy = env_cell(w, h, u, v)
-    return radiance_in_cell(env_img, i0, i1, j0, j1, fx, fy)
-
-
-@device
-def env_pdf(env_pdf_arr, env_info, d):
+def env_pdf(env_img, env_info, d):
     """Solid-angle density with which env_sample produces direction d: the bilinear
     interpolation of the texel-centre densities, as env_eval interpolates radiance."""
-    h = env_pdf_arr.shape[0]
-    w = env_pdf_arr.shape[1]
-    u, v, y = env_uv(env_info, d)
-    sin_t = math.sqrt(max(ONE - y * y, ZERO))
-    if sin_t <= ZERO:
-        return ZERO
-    i0, i1, j0, j1, fx, fy = env_cell(w, h, u, v)
-    return density_in_cell(env_pdf_arr, i0, i1, j0, j1, fx, fy, sin_t)
+    return env_lookup(env_img, env_info, d, True)[1]
 
 
 @device
-def env_lookup(env_img, env_pdf_arr, env_info, d, with_pdf):
+def env_lookup(env_img, env_info, d, with_pdf):
     """(env_eval, env_pdf if with_pdf else 0) of direction d from one mapping to (u, v)
-    and one cell: what a ray that escaped needs (the same numbers as the two calls)."""
+    and one load of the cell's texels: what a ray that escaped needs."""
     h = env_img.shape[0]
     w = env_img.shape[1]
     u, v, y = env_uv(env_info, d)
     i0, i1, j0, j1, fx, fy = env_cell(w, h, u, v)
+    t00, t10, t01, t11 = cell_texels(env_img, i0, i1, j0, j1)
     pdf = ZERO
     if with_pdf:
         sin_t = math.sqrt(max(ONE - y * y, ZERO))
         if sin_t > ZERO:
-            pdf = density_in_cell(env_pdf_arr, i0, i1, j0, j1, fx, fy, sin_t)
-    return radiance_in_cell(env_img, i0, i1, j0, j1, fx, fy), pdf
+            pdf = density_in_texels(t00, t10, t01, t11, fx, fy, sin_t)
+    return bilinear_blend(t00, t10, t01, t11, fx, fy), pdf
 
 
 @device
@@ -161,18 +153,19 @@ def _lerp_row(env_cond, j0, j1, t, i):
 
 
 @device
-def env_sample(env_marg, env_cond, env_pdf_arr, env_info, u1, u2):
+def env_sample(env_marg, env_cond, env_img, env_info, u1, u2):
     """(direction, solid-angle pdf); pdf = 0 means no sample."""
-    d, pdf, _, _ = env_sample_uv(env_marg, env_cond, env_pdf_arr, env_info, u1, u2)
+    d, pdf, _, _, _ = env_sample_lit(env_marg, env_cond, env_img, env_info, u1, u2)
     return d, pdf
 
 
 @device
-def env_sample_uv(env_marg, env_cond, env_pdf_arr, env_info, u1, u2):
-    """(direction, solid-angle pdf, u, v): env_sample and the direction's map
-    coordinates, for env_eval_uv."""
-    h = env_pdf_arr.shape[0]
-    w = env_pdf_arr.shape[1]
+def env_sample_lit(env_marg, env_cond, env_img, env_info, u1, u2):
+    """(direction, solid-angle pdf, radiance, u, v): env_sample, the radiance that env_eval
+    gives the direction (the bilinear blend at the sampled point of the cell whose texels
+    the density was read from: one load of four texels), and its map coordinates."""
+    h = env_img.shape[0]
+    w = env_img.shape[1]
     # the row cell k lies between texel rows k - 1 and k (clamped: half cells at the ends)
     k = sample_discrete(env_marg, u1)
     span = env_marg[k + 1] - env_marg[k]
@@ -194,10 +187,12 @@ def env_sample_uv(env_marg, env_cond, env_pdf_arr, env_info, u1, u2):
     c1 = _lerp_row(env_cond, j0, j1, t, lo + 1)
     xi2 = min(max((target - c0) / (c1 - c0), ZERO), ONE) if c1 > c0 else HALF
     i1 = lo + 1 if lo + 1 < w else 0
-    a = env_pdf_arr[j0, lo] + t * (env_pdf_arr[j1, lo] - env_pdf_arr[j0, lo])
-    b = env_pdf_arr[j0, i1] + t * (env_pdf_arr[j1, i1] - env_pdf_arr[j0, i1])
+    t00, t10, t01, t11 = cell_texels(env_img, lo, i1, j0, j1)
+    a = t00[ENV_DENSITY] + t * (t01[ENV_DENSITY] - t00[ENV_DENSITY])
+    b = t10[ENV_DENSITY] + t * (t11[ENV_DENSITY] - t10[ENV_DENSITY])
     s = sample_linear(a, b, xi2)
     p_uv = a + s * (b - a)
+    radiance = bilinear_blend(t00, t10, t01, t11, s, t)
     if k == 0:
         v = HALF * t / np.float32(h)
     elif k == h:
@@ -217,15 +212,16 @@ def env_sample_uv(env_marg, env_cond, env_pdf_arr, env_info, u1, u2):
     sn = env_info[ENV_SIN_ROT]
     d = (xm * c + zm * sn, cos_t, -xm * sn + zm * c)
     if sin_t <= ZERO:
-        return d, ZERO, u, v
-    return d, p_uv / (TWO_PI_SQ * sin_t), u, v
+        return d, ZERO, radiance, u, v
+    return d, p_uv / (TWO_PI_SQ * sin_t), radiance, u, v
 
 
 # ---- Host side: the tables the functions above read ----------------------------------------
 
 def environment_tables(img, compensate=True):
-    """(image, marginal CDF, conditional cumulative masses, texel-centre densities) of an
-    equirectangular map (float H x W x 3, linear radiance), or None when it is black
+    """(texels, marginal CDF, conditional cumulative masses) of an equirectangular map
+    (float H x W x 3, linear radiance): texels H x W x 4, the radiance and the density at
+    the texel's centre (layout ENV_DENSITY); or None when the map is black
     everywhere. NumPy, on the host: the bilinear 2-D distribution that :func:`env_sample`
     draws from and :func:`env_pdf` evaluates.
 
@@ -266,5 +262,7 @@ def environment_tables(img, compensate=True):
     cond[:, 1:] = np.cumsum(cells, axis=1) * scale
     marg = marg.astype(np.float32)
     marg[-1] = 1.0
-    return (img.astype(np.float32), marg, cond.astype(np.float32),
-            (wgt * scale).astype(np.float32))
+    texels = np.empty((h, w, ENV_TEXEL_WIDTH), np.float32)
+    texels[..., :3] = img
+    texels[..., ENV_DENSITY] = wgt * scale
+    return texels, marg, cond.astype(np.float32)

@@ -122,9 +122,8 @@ def make_kernels(features, target="cpu"):
     local_wo, eval_world, sample_world, leave, side_normal, own_skip = (
         scatter.local_wo, scatter.eval_world, scatter.sample_world, scatter.leave,
         scatter.side_normal, scatter.own_skip)
-    sample_emitter, environment_radiance, hit_emission, escaped = (
-        emitters.sample_emitter, emitters.environment_radiance, emitters.hit_emission,
-        emitters.escaped)
+    sample_emitter, hit_emission, escaped = (
+        emitters.sample_emitter, emitters.hit_emission, emitters.escaped)
 
     @step
     def camera_ray(cam, px, py, state, width, height):
@@ -188,7 +187,7 @@ def make_kernels(features, target="cpu"):
     @step
     def direct_light(beta, is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, wp,
                      ng_tri, p, origin, tri, wi, t_max, le, pdf_light, is_delta, light_tri, tri_v,
-                     bvh_box, bvh_child, env_img, env_info, stack):
+                     bvh_box, bvh_child, stack):
         """The one shadow-ray-and-MIS tail of next-event estimation, for every emitter
         kind (a sample_emitter record): (radiance added, shadow rays traced). ng: the
         side normal (see side_normal), ng_tri: the triangle's."""
@@ -199,7 +198,6 @@ def make_kernels(features, target="cpu"):
         if trace_any(leave(p, ng, wi, origin), wi, t_max, own_skip(tri, ng_tri, ng, wi),
                      light_tri, tri_v, bvh_box, bvh_child, stack):
             return (ZERO, ZERO, ZERO), 1
-        le = environment_radiance(env_img, env_info, wi, le, is_delta, light_tri)
         if is_delta:
             weight = ONE / pdf_light
         else:
@@ -228,8 +226,7 @@ def make_kernels(features, target="cpu"):
         n_shadow_rays = 0
         if tri < 0:
             if ANY_ENVIRONMENT:
-                le, weight = escaped(scene.env, scene.env_img, scene.env_pdf,
-                                     scene.env_info, d, pdf_prev)
+                le, weight = escaped(scene.env, scene.env_img, scene.env_info, d, pdf_prev)
                 radiance = add(radiance, scale(mul(beta, le), weight))
             return o, d, beta, radiance, pdf_prev, skip, bounce, cone, 0, 0, False
         # ---- the surface hit ----
@@ -275,8 +272,7 @@ def make_kernels(features, target="cpu"):
                 contribution, traced = direct_light(
                     beta, is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, wp,
                     ng_tri, p, origin, tri, wi, t_max, le, pdf_light, is_delta, light_tri,
-                    scene.tri_v, scene.bvh_box, scene.bvh_child, scene.env_img,
-                    scene.env_info, stack)
+                    scene.tri_v, scene.bvh_box, scene.bvh_child, stack)
                 radiance = add(radiance, contribution)
                 n_shadow_rays += traced
         # ---- BSDF sampling: the next ray ----
@@ -378,8 +374,7 @@ def make_kernels(features, target="cpu"):
                                            scene.bvh_child, stack)
             if tri < 0:
                 if ANY_ENVIRONMENT:
-                    le, weight = escaped(scene.env, scene.env_img, scene.env_pdf,
-                                         scene.env_info, d, pdf_prev)
+                    le, weight = escaped(scene.env, scene.env_img, scene.env_info, d, pdf_prev)
                     radiance = add(radiance, scale(mul(beta, le), weight))
                 break
             # ---- the surface hit ----
@@ -425,8 +420,7 @@ def make_kernels(features, target="cpu"):
                     contribution, traced = direct_light(
                         beta, is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, wp,
                         ng_tri, p, origin, tri, wi, t_max, le, pdf_light, is_delta, light_tri,
-                        scene.tri_v, scene.bvh_box, scene.bvh_child, scene.env_img,
-                        scene.env_info, stack)
+                        scene.tri_v, scene.bvh_box, scene.bvh_child, stack)
                     radiance = add(radiance, contribution)
                     n_shadow_rays += traced
             # ---- BSDF sampling: the next ray ----
@@ -495,8 +489,7 @@ def make_kernels(features, target="cpu"):
                                                scene.bvh_child, stack)
                 if tri < 0:
                     if ANY_ENVIRONMENT:
-                        le, weight = escaped(scene.env, scene.env_img, scene.env_pdf,
-                                             scene.env_info, d, ZERO)
+                        le, weight = escaped(scene.env, scene.env_img, scene.env_info, d, ZERO)
                         albedo = (min(max(le[0], ZERO), ONE), min(max(le[1], ZERO), ONE),
                                   min(max(le[2], ZERO), ONE))
                     break
@@ -647,7 +640,7 @@ def make_kernels(features, target="cpu"):
             d = (paths_f[PATH_D, path], paths_f[PATH_D + 1, path], paths_f[PATH_D + 2, path])
             beta = (paths_f[PATH_BETA, path], paths_f[PATH_BETA + 1, path],
                     paths_f[PATH_BETA + 2, path])
-            le, weight = escaped(scene.env, scene.env_img, scene.env_pdf, scene.env_info, d,
+            le, weight = escaped(scene.env, scene.env_img, scene.env_info, d,
                                  paths_f[PATH_PDF_PREV, path])
             contribution = scale(mul(beta, le), weight)
             for c in range(3):

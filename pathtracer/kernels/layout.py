@@ -196,6 +196,11 @@ LT_LEFT = 0
 LT_RIGHT = 1
 LT_PARENT = 2
 LT_LINK_WIDTH = 3
+# env_img, float32 (H, W, ENV_TEXEL_WIDTH): per texel of the environment map its radiance
+# (rgb, the intensity applied) and the sampling density p(u, v) at its centre (see
+# kernels.envmap), so that a texel is one 16-byte load
+ENV_DENSITY = 3
+ENV_TEXEL_WIDTH = 4
 # env_info, float32 (ENV_INFO_SIZE,)
 ENV_COS_ROT = 0       # cos and sin of the map's rotation about +Y
 ENV_SIN_ROT = 1
@@ -392,10 +397,9 @@ class SceneArrays(NamedTuple):
     tex_data: np.ndarray       # float32 (T, TEXEL_WIDTH) linear texels of all textures
     tex_int: np.ndarray        # int32 (K, TEX_INT_WIDTH)
     tex_f: np.ndarray          # float32 (K, TEX_F_WIDTH)
-    env_img: np.ndarray        # float32 (H, W, 3) see kernels.envmap
+    env_img: np.ndarray        # float32 (H, W, ENV_TEXEL_WIDTH) see kernels.envmap
     env_marg: np.ndarray       # float32 (H + 2,)
     env_cond: np.ndarray       # float32 (H, W + 1)
-    env_pdf: np.ndarray        # float32 (H, W)
     env_info: np.ndarray       # float32 (ENV_INFO_SIZE,)
     lt_node: np.ndarray        # float32 (L, LT_WIDTH) (light tree only)
     lt_link: np.ndarray        # int32 (L, LT_LINK_WIDTH) (light tree only)

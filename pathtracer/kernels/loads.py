@@ -1,6 +1,8 @@
 """Four neighbouring array elements in one load.
 
-A BVH node is 12 floats of boxes and 4 ints of children. Numba loads every element on its
+``load4(a, i, j)`` reads a[i, j:j+4] of a 2-D array, ``load4_texel(a, i, j)`` a[i, j, 0:4]
+of a 3-D one (the environment map's texels). A BVH node is 12 floats of boxes and 4 ints
+of children. Numba loads every element on its
 own (it cannot prove the alignment that a vector load needs), so a node visit issued 16
 load instructions on the GPU. ``load4`` reads ``a[i, j:j+4]`` as one 128-bit load
 (``ld.v4``) in compiled code; interpreted, it is four plain reads.
@@ -22,26 +24,39 @@ def load4(a, i, j):
     return a[i, j], a[i, j + 1], a[i, j + 2], a[i, j + 3]
 
 
-@intrinsic
-def _load4_ir(typingctx, a, i, j):
-    if not (isinstance(a, types.Array) and a.ndim == 2 and a.layout == "C"
-            and a.dtype in (types.float32, types.int32)
-            and isinstance(i, types.Integer) and isinstance(j, types.Integer)):
-        return None
-    sig = types.UniTuple(a.dtype, 4)(a, i, j)
-
-    def codegen(context, builder, signature, args):
-        aryty, ity, jty = signature.args
-        ary = context.make_array(aryty)(context, builder, args[0])
-        inds = [context.cast(builder, args[1], ity, types.intp),
-                context.cast(builder, args[2], jty, types.intp)]
-        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, inds, wraparound=False)
-        vty = ir.VectorType(context.get_data_type(aryty.dtype), 4)
-        on_gpu = "cuda" in type(context).__module__
-        v = builder.load(builder.bitcast(ptr, vty.as_pointer()), align=16 if on_gpu else 4)
-        vals = [builder.extract_element(v, ir.Constant(ir.IntType(32), k)) for k in range(4)]
-        return context.make_tuple(builder, signature.return_type, vals)
-    return sig, codegen
+def load4_texel(a, i, j):
+    """(a[i, j, 0], a[i, j, 1], a[i, j, 2], a[i, j, 3]) of a 3-D C-contiguous array whose
+    last axis has 4 elements."""
+    return a[i, j, 0], a[i, j, 1], a[i, j, 2], a[i, j, 3]
 
 
+def _load4_typer(ndim):
+    def typer(typingctx, a, i, j):
+        if not (isinstance(a, types.Array) and a.ndim == ndim and a.layout == "C"
+                and a.dtype in (types.float32, types.int32)
+                and isinstance(i, types.Integer) and isinstance(j, types.Integer)):
+            return None
+        return types.UniTuple(a.dtype, 4)(a, i, j), _load4_codegen
+    return typer
+
+
+def _load4_codegen(context, builder, signature, args):
+    """Four elements from a[i, j] (2-D: along the row; 3-D: along the last axis)."""
+    aryty, ity, jty = signature.args
+    ary = context.make_array(aryty)(context, builder, args[0])
+    inds = [context.cast(builder, args[1], ity, types.intp),
+            context.cast(builder, args[2], jty, types.intp)]
+    inds += [context.get_constant(types.intp, 0)] * (aryty.ndim - 2)
+    ptr = cgutils.get_item_pointer(context, builder, aryty, ary, inds, wraparound=False)
+    vty = ir.VectorType(context.get_data_type(aryty.dtype), 4)
+    on_gpu = "cuda" in type(context).__module__
+    v = builder.load(builder.bitcast(ptr, vty.as_pointer()), align=16 if on_gpu else 4)
+    vals = [builder.extract_element(v, ir.Constant(ir.IntType(32), k)) for k in range(4)]
+    return context.make_tuple(builder, signature.return_type, vals)
+
+
+_load4_ir = intrinsic(_load4_typer(2))
+_load4_texel_ir = intrinsic(_load4_typer(3))
 overload(load4, strict=False)(lambda a, i, j: (lambda a, i, j: _load4_ir(a, i, j)))
+overload(load4_texel, strict=False)(
+    lambda a, i, j: (lambda a, i, j: _load4_texel_ir(a, i, j)))

@@ -30,6 +30,7 @@ from ..kernels.envmap import environment_tables
 from ..kernels.layout import (CAM_CONE, CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_LENS_Y, CAM_ORIGIN,
                               CAM_RIGHT,
                               CAM_SIZE, CAM_UP, ENV_COS_ROT, ENV_INFO_SIZE, ENV_P_SELECT,
+                              ENV_TEXEL_WIDTH,
                               ENV_SIN_ROT, FILTER_BILINEAR, FILTER_NEAREST, FILTER_TRILINEAR,
                               LT_LINK_WIDTH, LT_WIDTH,
                               M_ALBEDO, M_ANISOTROPIC, M_EMISSION, M_ETA, M_TWO_SIDED, M_TYPE,
@@ -177,7 +178,7 @@ def compile_scene(desc, use_cache=True, bvh_options=None, memo=None):
         point_lights=lights.point_lights, env=env.color, bvh_box=tri.bvh.box,
         bvh_child=tri.bvh.child, tri_uv=tri.tri_uv, tri_t=tri.tri_t, mat_tex=mat_tex,
         tex_data=tex_data, tex_int=tex_int, tex_f=tex_f, env_img=env.img, env_marg=env.marg,
-        env_cond=env.cond, env_pdf=env.pdf, env_info=env.info, lt_node=lt_node,
+        env_cond=env.cond, env_info=env.info, lt_node=lt_node,
         lt_link=lt_link, tri_light_leaf=tri_light_leaf)
     w, h = desc.camera.resolution
     r = desc.render
@@ -700,10 +701,9 @@ def compile_triangles(objects, use_textures, use_tangents, bvh_options=None):
 
 class Environment(NamedTuple):
     color: np.ndarray      # float32 (3,) constant radiance (zero with a map)
-    img: np.ndarray
+    img: np.ndarray        # texels: radiance and density (kernels.envmap)
     marg: np.ndarray
     cond: np.ndarray
-    pdf: np.ndarray
     info: np.ndarray
     has_map: bool
     constant: bool         # a constant colour that is not black
@@ -714,10 +714,9 @@ def compile_environment(desc, has_lights, memo=None):
     """The environment's arrays. Next-event estimation picks an HDRI with probability 1/2
     when there are other lights (Mitsuba picks uniformly among emitters), else always."""
     color = np.zeros(3, np.float32)
-    img = np.zeros((1, 1, 3), np.float32)
+    img = np.zeros((1, 1, ENV_TEXEL_WIDTH), np.float32)
     marg = np.array([0.0, 1.0], np.float32)
     cond = np.array([[0.0, 1.0]], np.float32)
-    pdf = np.zeros((1, 1), np.float32)
     info = np.zeros(ENV_INFO_SIZE, np.float32)
     info[ENV_COS_ROT] = 1.0
     has_map = False
@@ -727,7 +726,7 @@ def compile_environment(desc, has_lights, memo=None):
             ("environment", file_key(env_map.path), env_map.intensity, env_map.compensate),
             lambda: _environment_map_tables(env_map, desc.path))
         if got is not None:
-            img, marg, cond, pdf = got
+            img, marg, cond = got
             has_map = True
             phi = math.radians(desc.environment.rotation)
             info[ENV_COS_ROT] = math.cos(phi)
@@ -737,7 +736,7 @@ def compile_environment(desc, has_lights, memo=None):
         color[:] = desc.environment
     constant = not has_map and desc.environment is not None and bool(color.any())
     p_lights = 1.0 - float(info[ENV_P_SELECT]) if has_map else 1.0
-    return Environment(color, img, marg, cond, pdf, info, has_map, constant, p_lights)
+    return Environment(color, img, marg, cond, info, has_map, constant, p_lights)
 
 
 def _environment_map_tables(env, scene_file):
