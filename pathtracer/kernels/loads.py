@@ -1,14 +1,13 @@
 """Four neighbouring array elements in one load.
 
-``load4(a, i, j)`` reads a[i, j:j+4] of a 2-D array, ``load4_texel(a, i, j)`` a[i, j, 0:4]
-of a 3-D one (the environment map's texels). A BVH node is 12 floats of boxes and 4 ints
-of children. Numba loads every element on its
+A BVH node is 12 floats of boxes and 4 ints of children. Numba loads every element on its
 own (it cannot prove the alignment that a vector load needs), so a node visit issued 16
-load instructions on the GPU. ``load4`` reads ``a[i, j:j+4]`` as one 128-bit load
-(``ld.v4``) in compiled code; interpreted, it is four plain reads.
+load instructions on the GPU. ``load4(a, i, j)`` reads ``a[i, j:j+4]`` of a 2-D array, and
+``load4_texel(a, i, j)`` ``a[i, j, 0:4]`` of a 3-D one (the environment map's texels), as
+one 128-bit load (``ld.v4``) in compiled code; interpreted, they are four plain reads.
 
-Alignment: the GPU needs the 16 bytes 16-byte aligned: rows of a multiple of 16 bytes, j a
-multiple of 4, and a base address aligned to 16, which every array that the CUDA backend
+Alignment: the GPU needs the 16 bytes 16-byte aligned: rows (or texels) of a multiple of 16
+bytes, j a multiple of 4 in a 2-D array, and a base address aligned to 16, which every array that the CUDA backend
 copies to the device has (``cuda.to_device`` allocates, aligned to 256 bytes; checked in
 ``backends.cuda``). On the CPU the load is marked 4-byte aligned (x86 loads any alignment),
 so arrays from anywhere work.
