@@ -60,10 +60,27 @@ def sphere(n_theta, n_phi, radius, center):
     """(vertices, faces, tri_v in BVH order, BVH) of a closed UV sphere."""
     v, f = uv_sphere(n_theta, n_phi)
     v = (v * radius + np.asarray(center)).astype(np.float32)
+    return (v, f) + mesh_arrays(v, f)
+
+
+def mesh_arrays(v, f):
+    """(tri_v in BVH order, BVH) of float32 vertices v and faces f."""
     v0, v1, v2 = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
     bvh = build_bvh(np.stack([v0, v1, v2], 1))
     tri_v = np.concatenate([v0, v1 - v0, v2 - v0], 1).astype(np.float32)[bvh.order]
-    return v, f, tri_v, bvh
+    return tri_v, bvh
+
+
+def count_slips(rec, o, d, tri_v, bvh):
+    """rec with, per traversal (TRACERS), the rays (o, d) that hit nothing (closest hit)
+    and that nothing occludes (any hit)."""
+    for name in TRACERS:
+        box, child = (bvh.box, bvh.child) if name == "binary" else widen_bvh(
+            tri_v, bvh.box, bvh.child)
+        tri, occluded = trace(name, o, d, tri_v, box, child)
+        rec[f"{name}_missed"] = int((tri < 0).sum())
+        rec[f"{name}_unoccluded"] = int((~occluded).sum())
+    return rec
 
 
 def edge_rays(v, f, center, distance, n, rng):
@@ -116,13 +133,7 @@ def measure(cases=CASES, rays=100_000, seed=11):
         rec = {"rings": n_theta, "segments": n_phi, "radius": radius, "centre": list(center),
                "distance": distance, "triangles": len(f), "rays_drawn": rays,
                "rays": len(o)}
-        for name in TRACERS:
-            box, child = (bvh.box, bvh.child) if name == "binary" else widen_bvh(
-                tri_v, bvh.box, bvh.child)
-            tri, occluded = trace(name, o, d, tri_v, box, child)
-            rec[f"{name}_missed"] = int((tri < 0).sum())
-            rec[f"{name}_unoccluded"] = int((~occluded).sum())
-        out.append(rec)
+        out.append(count_slips(rec, o, d, tri_v, bvh))
     return out
 
 
@@ -155,19 +166,10 @@ def measure_quads(cases=QUAD_CASES, rays=100_000, seed=11):
         o = target + up / np.linalg.norm(up, axis=1)[:, None] * distance
         d = target - o
         d /= np.linalg.norm(d, axis=1)[:, None]
-        o, d = o.astype(np.float32), d.astype(np.float32)
-        v0, v1, v2 = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
-        bvh = build_bvh(np.stack([v0, v1, v2], 1))
-        tri_v = np.concatenate([v0, v1 - v0, v2 - v0], 1).astype(np.float32)[bvh.order]
         rec = {"size": size, "offset": offset, "distance": distance, "bend": bend,
                "rays": rays}
-        for name in TRACERS:
-            box, child = (bvh.box, bvh.child) if name == "binary" else widen_bvh(
-                tri_v, bvh.box, bvh.child)
-            tri, occluded = trace(name, o, d, tri_v, box, child)
-            rec[f"{name}_missed"] = int((tri < 0).sum())
-            rec[f"{name}_unoccluded"] = int((~occluded).sum())
-        out.append(rec)
+        out.append(count_slips(rec, o.astype(np.float32), d.astype(np.float32),
+                               *mesh_arrays(v, f)))
     return out
 
 
