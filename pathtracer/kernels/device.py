@@ -6,13 +6,22 @@ simulator and H100/H200), while the function stays an ordinary Python object tha
 interpreted backend can call.
 
 :func:`step_marker` marks the integrator's named steps (functions that take the scene's
-arrays); the kernel factories take the target. On the CPU the steps are inlined at Numba's IR
-level: LLVM does not inline functions that large,
-and a call that passes a dozen arrays (each expanded to its data pointer, shape and
-strides) and checks an error status cost a third of the Cornell box's CPU throughput when
-the steps were first split out (measured with ``python -m bench.ab``). ``inline='always'``
-breaks the CUDA target (as does a CPU-only inlined overload beside a generic one: typing
-errors on H100), so for CUDA the steps are ordinary device functions.
+arrays); the kernel factories take the target. On the CPU every step is compiled with
+``forceinline=True`` (LLVM's ``alwaysinline``): LLVM does not inline functions that large
+by itself, and a call that passes a dozen arrays (each expanded to its meminfo, data
+pointer, shape and strides: direct_light took 95 arguments, most of them copied through
+the stack at every call) and checks an error status cost a third of the Cornell box's CPU
+throughput when the steps were first split out (measured with ``python -m bench.ab``).
+Numba's own IR-level inlining (``inline='always'``) does the same at 2-4x the cold compile
+time, and it breaks the CUDA target (as does a CPU-only inlined overload beside a generic
+one: typing errors on H100), so for CUDA the steps are ordinary device functions, which
+NVVM inlines itself.
+
+One marker per function: ``register_jitable(**options)`` returns a decorator that *pops*
+``inline`` from its options, so a decorator object shared by several functions inlined
+only the first it marked (numba 0.68, ``numba/core/extending.py``); until 2026-11-27 only
+the first step of each kernel factory was inlined on the CPU (docs/benchmarks.md, "Every
+step inlined on the CPU").
 """
 from numba.extending import register_jitable
 
@@ -33,10 +42,15 @@ def device(fn):
 
 def step_marker(target):
     """The marker of the integrator's named steps when compiling for ``target``: on the
-    CPU inlined at Numba's IR level, elsewhere an ordinary device function."""
+    CPU always inlined by LLVM, elsewhere an ordinary device function."""
     if target == "cpu":
-        return register_jitable(inline="always")
+        return _always_inlined
     return register_jitable
+
+
+def _always_inlined(fn):
+    # a new register_jitable per function (see the module's docstring)
+    return register_jitable(forceinline=True)(fn)
 
 
 def entry_marker(target):
