@@ -263,14 +263,26 @@ from pathtracer.accel.wide import WIDE_STACK_SIZE
 from pathtracer.backends.cpu import cpu_arrays
 one_pixel(np.zeros((1, 1, 3), np.float32), np.zeros((1, 1, 3), np.int32),
           np.zeros(WIDE_STACK_SIZE, np.int32), cpu_arrays(scene.arrays)[0])
-print(sum(len(x) for x in one_pixel.inspect_llvm().values()))
+ir = "\n".join(one_pixel.inspect_llvm().values())
+print(len(ir))
+# the steps that the CPU always inlines, by their mangled names (e.g.
+# 12make_kernels12_3clocals_3e12direct_light), and those still called
+import re
+from pathtracer.kernels.device import CPU_INLINED
+def mangled(qualname):
+    parts = [p.replace("<locals>", "_3clocals_3e") for p in qualname.split(".")]
+    return "".join("%d%s" % (len(p), p) for p in parts)
+callees = set(re.findall(r"call [^@\n]*@\"?([\w.$]+)", ir))
+print(len(CPU_INLINED), ",".join(sorted(q for q in CPU_INLINED
+                                       if any(mangled(q) in c for c in callees))) or "-")
 """
 
 
 def test_specialisation_removes_unused_code():
     """A kernel for a scene without point lights, environment, smooth normals, principled
     materials, textures, an HDRI or a thin lens compiles none of their code: each flag,
-    when set, adds code to the base kernel. Each variant is
+    when set, adds code to the base kernel; and no variant calls a step (all inlined on the
+    CPU). Each variant is
     compiled in a fresh process (the IR of one process depends on what it compiled before)."""
     import subprocess
     import sys
@@ -280,14 +292,20 @@ def test_specialisation_removes_unused_code():
     variants = ("1000", "1100", "1010", "1001", "10001", "100001", "100000001",
                 "1000000001")
 
-    def size(flags):      # (a compile is single-threaded: one process per core)
+    def probe(flags):      # (a compile is single-threaded: one process per core)
         r = subprocess.run([sys.executable, "-c", SPECIALISATION_PROBE, ROOT, flags],
                            capture_output=True, text=True, cwd=ROOT, timeout=600)
         assert r.returncode == 0, r.stderr[-2000:]
-        return int(r.stdout.split()[-1])
+        size, n_steps, called = r.stdout.split()[-3:]
+        return int(size), int(n_steps), called
     with ThreadPoolExecutor(max(1, min(4, os.cpu_count() or 1))) as pool:
-        sizes = list(pool.map(size, variants))
+        probes = list(pool.map(probe, variants))
+    sizes = [size for size, _, _ in probes]
     assert all(size > sizes[0] for size in sizes[1:]), sizes
+    # ... and the CPU kernels call none of the integrator's steps: each is inlined (a
+    # decorator shared by several steps once inlined only the first: kernels.device)
+    for flags, (_, n_steps, called) in zip(variants, probes):
+        assert n_steps > 20 and called == "-", (flags, called)
 
 
 @gpu

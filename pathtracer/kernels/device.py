@@ -48,8 +48,14 @@ def step_marker(target):
     return register_jitable
 
 
+# qualified names of the functions marked as CPU steps (tests check that the compiled CPU
+# kernels call none of them)
+CPU_INLINED = set()
+
+
 def _always_inlined(fn):
     # a new register_jitable per function (see the module's docstring)
+    CPU_INLINED.add(fn.__qualname__)
     return register_jitable(forceinline=True)(fn)
 
 
