@@ -13,7 +13,9 @@ that Numba/LLVM inlined are counted in their caller:
 the table shows what remains a call (on the CPU most device functions are inlined into
 ``render_sample``; traversal, environment lookups and the principled evaluation are not).
 The child compiles into a fresh kernel cache (a kernel loaded from the disk cache keeps no
-object code to read the symbols from). ``--annotate FUNCTION`` also prints that function's
+object code to read the symbols from). ``--calls direct_light,sample_world`` keeps those
+steps as calls (they are inlined on the CPU), so that their shares show apart.
+``--annotate FUNCTION`` also prints that function's
 machine code (objdump) with each instruction's share. Needs ``perf``, ``nm`` and
 ``objdump`` (binutils); no hardware counters are needed (a VM works).
 """
@@ -124,7 +126,8 @@ def profile(args):
                    ["--code", code] if args.annotate else [])
         # a fresh kernel cache: a kernel loaded from the disk cache keeps no object code to
         # read its symbols from, so the child compiles (untimed: rendering starts after)
-        env = dict(os.environ, PT_RENDER_CACHE=os.path.join(tmp, "cache"))
+        env = dict(os.environ, PT_RENDER_CACHE=os.path.join(tmp, "cache"),
+                   PT_RENDER_CPU_CALLS=",".join(args.calls))
         env.pop("NUMBA_CACHE_DIR", None)
         run = subprocess.run(cmd, capture_output=True, text=True, env=env)
         if run.returncode != 0:
@@ -240,6 +243,11 @@ def main(argv=None):
     p.add_argument("--spp", type=int, default=4, help="samples per pixel per pass")
     p.add_argument("--top", type=int, default=20)
     p.add_argument("--json")
+    p.add_argument("--calls", type=lambda s: [w for w in s.split(",") if w], default=[],
+                   metavar="STEP[,STEP]",
+                   help="integrator steps (kernels.device.step_marker) to keep as calls "
+                        "rather than inline, so that the table shows their share apart "
+                        "(the call itself costs a little: shares, not speeds)")
     p.add_argument("--annotate", metavar="FUNCTION",
                    help="also print this function's instructions with their sample shares "
                         "(a name as the table prints it, e.g. envmap.env_sample_lit)")

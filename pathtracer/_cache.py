@@ -67,6 +67,8 @@ def warn(message):
 def source_hash():
     root = os.path.dirname(os.path.abspath(__file__))
     h = hashlib.sha256(numba.__version__.encode())
+    # steps kept as calls for a profile (kernels.device.KEEP_CALLS) compile other code
+    h.update(os.environ.get("PT_RENDER_CPU_CALLS", "").encode())
     for folder, dirs, files in sorted(os.walk(root)):
         dirs.sort()
         for name in sorted(files):

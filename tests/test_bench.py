@@ -217,7 +217,9 @@ def test_cpu_profile_names_and_symbol_table():
         pytest.skip("needs nm (binutils)")
     with tempfile.TemporaryDirectory() as tmp:
         syms = os.path.join(tmp, "syms.json")
-        env = dict(os.environ, PT_RENDER_CACHE=os.path.join(tmp, "cache"))
+        # (--calls: one step kept as a call, so that it has a symbol of its own)
+        env = dict(os.environ, PT_RENDER_CACHE=os.path.join(tmp, "cache"),
+                   PT_RENDER_CPU_CALLS="direct_light")
         env.pop("NUMBA_CACHE_DIR", None)
         code = os.path.join(tmp, "code.json")
         r = subprocess.run([sys.executable, "-m", "bench.cpu_profile", "cornell-box", "--child",
@@ -228,7 +230,8 @@ def test_cpu_profile_names_and_symbol_table():
         code_bytes = json.load(open(code))
         rate = json.loads(r.stdout.strip().splitlines()[-1])
     names = {short_name(row[2]) for row in rows}
-    assert {"integrator.render_sample", "wide.closest_hit_wide"} <= names, sorted(names)
+    assert {"integrator.render_sample", "wide.closest_hit_wide",
+            "integrator.direct_light"} <= names, sorted(names)
     # the machine code of every function, as long as its symbol says
     assert all(len(code_bytes[str(a)]) == 2 * n for a, n, _ in rows)
     assert rate["render_start"] <= rate["render_end"]

@@ -23,6 +23,8 @@ only the first it marked (numba 0.68, ``numba/core/extending.py``); until 2026-1
 the first step of each kernel factory was inlined on the CPU (docs/benchmarks.md, "Every
 step inlined on the CPU").
 """
+import os
+
 from numba.extending import register_jitable
 
 # LLVM's fast-math flags that the compiled kernels use (CPU always; CUDA with fast=True,
@@ -53,7 +55,15 @@ def step_marker(target):
 CPU_INLINED = set()
 
 
+# A profiling aid (``python -m bench.cpu_profile --calls direct_light,...``): the steps
+# named here stay calls on the CPU, so that a profile shows their share apart. Part of the
+# kernel cache's key (pathtracer._cache.source_hash).
+KEEP_CALLS = frozenset(filter(None, os.environ.get("PT_RENDER_CPU_CALLS", "").split(",")))
+
+
 def _always_inlined(fn):
+    if fn.__name__ in KEEP_CALLS:
+        return register_jitable(fn)
     # a new register_jitable per function (see the module's docstring)
     CPU_INLINED.add(fn.__qualname__)
     return register_jitable(forceinline=True)(fn)
