@@ -1,6 +1,7 @@
 """Closest-hit and any-hit rays/s of the binary and the CPU's four-wide BVH, on one scene:
 
     python -m bench.traversal bunny-studio --rays 400000 --json out.json
+    python -m bench.traversal bunny-studio --backend cuda --rays 4000000
 
 Rays start on the scene's triangles (a uniform triangle, its centroid) in uniformly random
 directions, the triangle they leave skipped: rays as a path's bounce and shadow rays see
@@ -16,7 +17,7 @@ import sys
 import time
 
 import numpy as np
-from numba import njit, prange
+from numba import cuda, njit, prange
 
 from bench.scenes import CONVERGENCE, convergence_desc
 from pathtracer.accel.wide import WIDE_STACK_SIZE, widen_bvh
@@ -55,11 +56,46 @@ def tracers(closest, occluded):
     return trace, shadow
 
 
+def cuda_tracers(closest, occluded, stack_size, block=128):
+    """tracers' (trace, shadow) as CUDA kernels, one ray per thread with its own stack of
+    ``stack_size`` int32 in local memory (as the renderer's GPU kernels keep it); called
+    with device arrays."""
+    @cuda.jit
+    def trace_kernel(o, d, skip, tri_v, box, child, t_out, tri_out, any_out):
+        i = cuda.grid(1)
+        if i < o.shape[0]:
+            stack = cuda.local.array(stack_size, np.int32)
+            oi = (o[i, 0], o[i, 1], o[i, 2])
+            di = (d[i, 0], d[i, 1], d[i, 2])
+            t, tri, b1, b2 = closest(oi, di, INF, skip[i], tri_v, box, child, stack)
+            t_out[i] = t
+            tri_out[i] = tri
+
+    @cuda.jit
+    def shadow_kernel(o, d, skip, tri_v, box, child, t_out, tri_out, any_out):
+        i = cuda.grid(1)
+        if i < o.shape[0]:
+            stack = cuda.local.array(stack_size, np.int32)
+            oi = (o[i, 0], o[i, 1], o[i, 2])
+            di = (d[i, 0], d[i, 1], d[i, 2])
+            any_out[i] = occluded(oi, di, INF, skip[i], -1, tri_v, box, child, stack)
+
+    def launcher(kernel):
+        def run(o, *rest):
+            kernel[(o.shape[0] + block - 1) // block, block](o, *rest)
+            cuda.synchronize()
+        return run
+    return launcher(trace_kernel), launcher(shadow_kernel)
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("scene", choices=list(CONVERGENCE))
     p.add_argument("--rays", type=int, default=400_000)
     p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--backend", default="cpu", choices=("cpu", "cuda"),
+                   help="cuda: both trees traversed on the GPU, one ray per thread (the "
+                        "renderer's GPU kernels traverse the binary tree)")
     p.add_argument("--json")
     args = p.parse_args(argv)
     from pathtracer.scene import compile_scene
@@ -76,24 +112,37 @@ def main(argv=None):
     t0 = time.perf_counter()
     wide, wchild = widen_bvh(a.tri_v, a.bvh_box, a.bvh_child)
     widen_s = time.perf_counter() - t0
-    trees = {"binary": (tracers(closest_hit, any_hit), a.bvh_box, a.bvh_child),
-             "four-wide": (tracers(closest_hit_wide, any_hit_wide), wide, wchild)}
+    if args.backend == "cuda":
+        from pathtracer.kernels.constants import STACK_SIZE
+        trees = {"binary": (cuda_tracers(closest_hit, any_hit, STACK_SIZE), a.bvh_box,
+                            a.bvh_child),
+                 "four-wide": (cuda_tracers(closest_hit_wide, any_hit_wide, WIDE_STACK_SIZE),
+                               wide, wchild)}
+        put, get = cuda.to_device, (lambda x: x.copy_to_host())
+    else:
+        trees = {"binary": (tracers(closest_hit, any_hit), a.bvh_box, a.bvh_child),
+                 "four-wide": (tracers(closest_hit_wide, any_hit_wide), wide, wchild)}
+        put = get = (lambda x: x)
+    rays = [put(x) for x in (origins, dirs, skip, a.tri_v)]
     out = {}
     hits = {}
     for name, ((trace, shadow), box, child) in trees.items():
-        t = np.empty(args.rays, np.float32)
-        tri = np.empty(args.rays, np.int32)
-        hit = np.empty(args.rays, np.bool_)
+        t = put(np.empty(args.rays, np.float32))
+        tri = put(np.empty(args.rays, np.int32))
+        hit = put(np.empty(args.rays, np.bool_))
+        box, child = put(box), put(child)
         rec = {}
         for label, fn in (("closest_hit", trace), ("any_hit", shadow)):
-            fn(origins, dirs, skip, a.tri_v, box, child, t, tri, hit)      # compile, warm up
+            t_c = time.perf_counter()
+            fn(*rays, box, child, t, tri, hit)      # compile, warm up
+            rec[label + "_first_call_s"] = time.perf_counter() - t_c
             times = []
             for _ in range(args.repeats):
                 s = time.perf_counter()
-                fn(origins, dirs, skip, a.tri_v, box, child, t, tri, hit)
+                fn(*rays, box, child, t, tri, hit)
                 times.append(time.perf_counter() - s)
             rec[label + "_rays_per_s"] = args.rays / float(np.median(times))
-        hits[name] = (tri.copy(), hit.copy(), t.copy())
+        hits[name] = (get(tri).copy(), get(hit).copy(), get(t).copy())
         out[name] = rec
         print(f"{args.scene} {name}: closest hit {rec['closest_hit_rays_per_s'] / 1e6:.2f} M "
               f"rays/s, any hit {rec['any_hit_rays_per_s'] / 1e6:.2f} M rays/s")
@@ -105,7 +154,8 @@ def main(argv=None):
         with open(args.json, "w") as f:
             json.dump({"command": "python -m bench.traversal " + " ".join(sys.argv[1:]),
                        "machine": machine(), "date": now(), "versions": versions(),
-                       "scene": args.scene, "rays": args.rays, "triangles": int(n_tri),
+                       "scene": args.scene, "backend": args.backend, "rays": args.rays,
+                       "triangles": int(n_tri),
                        "binary_nodes": int(len(a.bvh_box)), "wide_nodes": int(len(wchild)),
                        "wide_bytes": int(wide.nbytes + wchild.nbytes),
                        "binary_bytes": int(a.bvh_box.nbytes + a.bvh_child.nbytes),

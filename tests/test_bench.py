@@ -299,3 +299,19 @@ def test_watertight_counts_rays_that_slip_through():
     d = (d / np.linalg.norm(d, axis=1)[:, None]).astype(np.float32)
     tri, occluded = trace("binary", o, d, tri_v, bvh.box, bvh.child)
     assert (tri >= 0).all() and occluded.all()
+
+
+def test_traversal_benchmark_on_the_cuda_simulator(tmp_path):
+    """bench.traversal --backend cuda (both trees' traversal as CUDA kernels, one ray per
+    thread), run on the CUDA simulator: the two trees find the same hits."""
+    import json
+    import os
+    out = tmp_path / "t.json"
+    r = subprocess.run([sys.executable, "-m", "bench.traversal", "cornell-box", "--backend",
+                        "cuda", "--rays", "300", "--repeats", "1", "--json", str(out)],
+                       cwd=ROOT, env=dict(os.environ, NUMBA_ENABLE_CUDASIM="1"),
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    rec = json.loads(out.read_text())
+    assert rec["same_hits"] and rec["backend"] == "cuda"
+    assert set(rec["results"]) == {"binary", "four-wide"}

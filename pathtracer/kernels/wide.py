@@ -27,8 +27,9 @@ as the binary tree's), so the kernels' arguments and types do not change:
 
 Only the CPU backend builds these arrays; the GPU keeps the binary tree, whose traversal
 was tuned there (vector loads of its nodes, docs/benchmarks.md). This code is plain Numba
-and LLVM IR that the CUDA target could compile too; whether the wide tree also pays on the
-GPU is not measured yet.
+and LLVM IR that the CUDA target compiles too (``python -m bench.traversal --backend
+cuda``), and there it loses: on an H200 the wide tree traced 0.64-0.88x the binary one's
+closest hits and 0.76-0.80x its any hits (docs/benchmarks.md, 2026-11-27).
 """
 import math
 
@@ -107,9 +108,14 @@ def _row_loader(context, builder, aryty, ary_value, row_value, row_type, v4):
                                      [row, context.get_constant(types.intp, 0)],
                                      wraparound=False)
 
+    # the GPU needs 16-byte alignment for one vector load (rows of 48 bytes from an
+    # allocation aligned to 256, offsets k of whole vectors: see kernels.loads); x86 loads
+    # any alignment
+    align = 16 if "cuda" in type(context).__module__ else 4
+
     def load(k):
         ptr = builder.gep(start, [context.get_constant(types.intp, k)])
-        return builder.load(builder.bitcast(ptr, v4.as_pointer()), align=4)
+        return builder.load(builder.bitcast(ptr, v4.as_pointer()), align=align)
     return load
 
 
