@@ -9,8 +9,8 @@ one 128-bit load (``ld.v4``) in compiled code; interpreted, they are four plain 
 Alignment: the GPU needs the 16 bytes 16-byte aligned: rows (or texels) of a multiple of 16
 bytes, j a multiple of 4 in a 2-D array, and a base address aligned to 16, which every
 array that the CUDA backend copies to the device has (``cuda.to_device`` allocates, aligned
-to 256 bytes; checked in ``backends.cuda``). On the CPU the load is marked 4-byte aligned (x86 loads any alignment),
-so arrays from anywhere work.
+to 256 bytes; checked in ``backends.cuda``). On the CPU the load is marked 4-byte aligned
+(x86 loads any alignment), so arrays from anywhere work.
 """
 from llvmlite import ir
 from numba import types
