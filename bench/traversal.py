@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 from numba import cuda, njit, prange
+from numba.extending import register_jitable
 
 from bench.scenes import CONVERGENCE, convergence_desc
 from pathtracer.accel.wide import WIDE_STACK_SIZE, widen_bvh
@@ -29,63 +30,56 @@ from pathtracer.kernels.wide import any_hit_wide, closest_hit_wide
 CHUNK = 256     # rays per stack allocation, as the renderer allocates one per image row
 
 
+def ray_steps(closest, occluded):
+    """(trace_ray, shadow_ray): ray i of the arrays through ``closest`` (writing t and the
+    triangle) or ``occluded`` (writing any hit), with the caller's traversal stack; the one
+    per-ray body of the CPU loops and the CUDA kernels below."""
+    @register_jitable
+    def trace_ray(i, o, d, skip, tri_v, box, child, t_out, tri_out, any_out, stack):
+        t, tri, b1, b2 = closest((o[i, 0], o[i, 1], o[i, 2]), (d[i, 0], d[i, 1], d[i, 2]),
+                                 INF, skip[i], tri_v, box, child, stack)
+        t_out[i] = t
+        tri_out[i] = tri
+
+    @register_jitable
+    def shadow_ray(i, o, d, skip, tri_v, box, child, t_out, tri_out, any_out, stack):
+        any_out[i] = occluded((o[i, 0], o[i, 1], o[i, 2]), (d[i, 0], d[i, 1], d[i, 2]), INF,
+                              skip[i], -1, tri_v, box, child, stack)
+    return trace_ray, shadow_ray
+
+
 def tracers(closest, occluded):
     """(trace, shadow): compiled loops over rays, in parallel over chunks of CHUNK rays,
     of ``closest`` (writing t and the triangle) and ``occluded`` (writing any hit)."""
-    @njit(parallel=True)
-    def trace(o, d, skip, tri_v, box, child, t_out, tri_out, any_out):
-        n = o.shape[0]
-        for c in prange((n + CHUNK - 1) // CHUNK):
-            stack = np.empty(WIDE_STACK_SIZE, np.int32)
-            for i in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
-                oi = (o[i, 0], o[i, 1], o[i, 2])
-                di = (d[i, 0], d[i, 1], d[i, 2])
-                t, tri, b1, b2 = closest(oi, di, INF, skip[i], tri_v, box, child, stack)
-                t_out[i] = t
-                tri_out[i] = tri
-
-    @njit(parallel=True)
-    def shadow(o, d, skip, tri_v, box, child, t_out, tri_out, any_out):
-        n = o.shape[0]
-        for c in prange((n + CHUNK - 1) // CHUNK):
-            stack = np.empty(WIDE_STACK_SIZE, np.int32)
-            for i in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
-                oi = (o[i, 0], o[i, 1], o[i, 2])
-                di = (d[i, 0], d[i, 1], d[i, 2])
-                any_out[i] = occluded(oi, di, INF, skip[i], -1, tri_v, box, child, stack)
-    return trace, shadow
+    def loop(ray):
+        @njit(parallel=True)
+        def run(o, d, skip, tri_v, box, child, t_out, tri_out, any_out):
+            n = o.shape[0]
+            for c in prange((n + CHUNK - 1) // CHUNK):
+                stack = np.empty(WIDE_STACK_SIZE, np.int32)
+                for i in range(c * CHUNK, min(n, (c + 1) * CHUNK)):
+                    ray(i, o, d, skip, tri_v, box, child, t_out, tri_out, any_out, stack)
+        return run
+    return tuple(loop(ray) for ray in ray_steps(closest, occluded))
 
 
 def cuda_tracers(closest, occluded, stack_size, block=128):
     """tracers' (trace, shadow) as CUDA kernels, one ray per thread with its own stack of
     ``stack_size`` int32 in local memory (as the renderer's GPU kernels keep it); called
     with device arrays."""
-    @cuda.jit
-    def trace_kernel(o, d, skip, tri_v, box, child, t_out, tri_out, any_out):
-        i = cuda.grid(1)
-        if i < o.shape[0]:
-            stack = cuda.local.array(stack_size, np.int32)
-            oi = (o[i, 0], o[i, 1], o[i, 2])
-            di = (d[i, 0], d[i, 1], d[i, 2])
-            t, tri, b1, b2 = closest(oi, di, INF, skip[i], tri_v, box, child, stack)
-            t_out[i] = t
-            tri_out[i] = tri
+    def launcher(ray):
+        @cuda.jit
+        def kernel(o, d, skip, tri_v, box, child, t_out, tri_out, any_out):
+            i = cuda.grid(1)
+            if i < o.shape[0]:
+                stack = cuda.local.array(stack_size, np.int32)
+                ray(i, o, d, skip, tri_v, box, child, t_out, tri_out, any_out, stack)
 
-    @cuda.jit
-    def shadow_kernel(o, d, skip, tri_v, box, child, t_out, tri_out, any_out):
-        i = cuda.grid(1)
-        if i < o.shape[0]:
-            stack = cuda.local.array(stack_size, np.int32)
-            oi = (o[i, 0], o[i, 1], o[i, 2])
-            di = (d[i, 0], d[i, 1], d[i, 2])
-            any_out[i] = occluded(oi, di, INF, skip[i], -1, tri_v, box, child, stack)
-
-    def launcher(kernel):
         def run(o, *rest):
             kernel[(o.shape[0] + block - 1) // block, block](o, *rest)
             cuda.synchronize()
         return run
-    return launcher(trace_kernel), launcher(shadow_kernel)
+    return tuple(launcher(ray) for ray in ray_steps(closest, occluded))
 
 
 def main(argv=None):

@@ -42,7 +42,7 @@ from numba.extending import intrinsic, overload
 from .constants import INF, SLAB_SCALE, ZERO
 from .device import device
 from .intersect import ray_triangle, safe_inverse, slab
-from .loads import load4
+from .loads import load4, vector_alignment
 
 WIDE_ROW = 12         # floats per row of ``wide``
 NODE_ROWS = 2         # a node's 24 floats
@@ -108,10 +108,9 @@ def _row_loader(context, builder, aryty, ary_value, row_value, row_type, v4):
                                      [row, context.get_constant(types.intp, 0)],
                                      wraparound=False)
 
-    # the GPU needs 16-byte alignment for one vector load (rows of 48 bytes from an
-    # allocation aligned to 256, offsets k of whole vectors: see kernels.loads); x86 loads
-    # any alignment
-    align = 16 if "cuda" in type(context).__module__ else 4
+    # (on the GPU 16-byte aligned: rows of 48 bytes from an allocation aligned to 256,
+    # offsets k of whole vectors)
+    align = vector_alignment(context)
 
     def load(k):
         ptr = builder.gep(start, [context.get_constant(types.intp, k)])
