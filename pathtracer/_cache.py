@@ -27,6 +27,11 @@ A cache must never cost a render:
   scene's kernel for this one, a silently wrong image (seen once in CI). Loads and saves of
   our folder therefore hold a lock on the function's index (``flock``: shared to load,
   exclusive to save).
+- **Several processes need the same new kernel** (Ray workers on one machine, a batch
+  beside a preview, the test suite's workers): each would compile it, 20-40 s of a core
+  apiece. The first compile of a kernel in a process therefore holds a lock named after
+  the kernel in the cache folder (:func:`compile_lock`); a second process that needs the
+  same kernel waits for it and then loads what the first one saved.
 - **Kernels compiled in different processes, loaded into one.** Numba names a compiled
   function's symbol after its qualified name, argument types and a counter that starts at
   1 in every process. Closures of one factory for two scenes (``render_pass``,
@@ -177,6 +182,52 @@ def index_lock(cache, exclusive):
             if fd is not None:
                 os.close(fd)
             fd = None
+    try:
+        yield
+    finally:
+        if fd is not None:
+            os.close(fd)       # releases the lock
+
+
+# How long a process waits for another one's compile of the same kernel before it
+# compiles the kernel itself (a holder stopped with SIGSTOP, or a machine so loaded that
+# one compile takes this long).
+COMPILE_WAIT_SECONDS = 900.0
+
+
+@contextlib.contextmanager
+def compile_lock(name, dispatcher):
+    """Hold the lock ``<cache folder>/compile-locks/<name>.lock`` while ``dispatcher`` (a
+    Numba dispatcher) is compiled or loaded for the first time in this process: another
+    process compiling the same kernel finishes first and this one loads its result from
+    the disk cache. Nothing is locked once the dispatcher has a compiled signature, when the
+    disk cache is off, or where no lock can be had (no fcntl, a read-only folder). The wait
+    polls, so Ctrl-C ends it; after COMPILE_WAIT_SECONDS the kernel is compiled anyway."""
+    folder = _state["folder"]
+    if (dispatcher.signatures or not _state["enabled"] or folder is None
+            or fcntl is None):
+        yield
+        return
+    fd = None
+    try:
+        locks = os.path.join(folder, "compile-locks")
+        os.makedirs(locks, exist_ok=True)
+        fd = os.open(os.path.join(locks, name + ".lock"), os.O_RDWR | os.O_CREAT, 0o644)
+        deadline = time.monotonic() + COMPILE_WAIT_SECONDS
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    os.close(fd)
+                    fd = None
+                    break
+                time.sleep(0.1)
+    except OSError:
+        if fd is not None:
+            os.close(fd)
+        fd = None
     try:
         yield
     finally:

@@ -17,16 +17,28 @@ from pathtracer.scene import load_scene, load_scene_description, compile_scene
 from pathtracer.backends.cuda import CUDABackend
 from pathtracer.backends.cpu import CPUBackend
 from tests.helpers import furnace_scene, write_scene
+import pathtracer.backends.wavefront as wavefront
+# The simulator runs a block's threads as Python threads, all of them, with or without
+# work: blocks no larger than these images (and the queue launches' blocks of 32, not 128)
+# took this script from 51 to 38 s (kernels cached); the kernels' code and numbers do not
+# depend on the shape.
+wavefront.BLOCK = 32
+
+
+def small_cuda(scene, **options):
+    return CUDABackend(scene, block=(6, 5), **options)
+
+
 out = {}
 d = load_scene_description(sys.argv[1] + "/scenes/cornell-box.json")
 d.camera.resolution = (6, 5)
 s = compile_scene(d)
-a, sa = [x.copy() for x in CUDABackend(s).render_pass(0, 2, 1, 7, 5)]
+a, sa = [x.copy() for x in small_cuda(s).render_pass(0, 2, 1, 7, 5)]
 b, sb = [x.copy() for x in CPUBackend(s).render_pass(0, 2, 1, 7, 5)]
 out["cornell_maxdiff"] = float(np.abs(a - b).max())
 out["cornell_sum"] = [float(a.sum()), float(b.sum())]
 out["stats_equal"] = bool((sa == sb).all())
-c, tc = [x.copy() for x in CUDABackend(s).render_pass_totals(0, 2, 1, 7, 5)]
+c, tc = [x.copy() for x in small_cuda(s).render_pass_totals(0, 2, 1, 7, 5)]
 out["totals_equal"] = bool((c == a).all() and tc.shape == (1, 1, 3) and
                            (tc.reshape(3) == sb.reshape(-1, 3).sum(axis=0)).all())
 # The wavefront kernels (backends.wavefront): the CPU's image, with a pass split into
@@ -35,9 +47,9 @@ out["totals_equal"] = bool((c == a).all() and tc.shape == (1, 1, 3) and
 wave = {}
 active = np.ones((5, 6), np.uint8)
 active[2, 3] = 0
-m5 = CUDABackend(s, wavefront=False).render_pass(0, 5, 1, 7, 5)[0].copy()
+m5 = small_cuda(s, wavefront=False).render_pass(0, 5, 1, 7, 5)[0].copy()
 for name, options in [("finish", dict(wave_levels=2)), ("all", dict(wave_levels=None))]:
-    w = CUDABackend(s, wavefront=options)
+    w = small_cuda(s, wavefront=options)
     w.wavefront.max_paths = 60          # 2 of the pass's 5 samples per launch
     x, sx = [v.copy() for v in w.render_pass(0, 5, 1, 7, 5)]
     y, sy = [v.copy() for v in CPUBackend(s).render_pass(0, 5, 1, 7, 5)]
@@ -53,8 +65,8 @@ out["wavefront"] = wave
 # launches, bit for bit; the wavefront with sample ranges of 2 samples, one of which
 # straddles the split at 3
 halves = {}
-for name, be in [("megakernel", CUDABackend(s, wavefront=False)),
-                 ("wavefront", CUDABackend(s, wavefront=dict(wave_levels=None)))]:
+for name, be in [("megakernel", small_cuda(s, wavefront=False)),
+                 ("wavefront", small_cuda(s, wavefront=dict(wave_levels=None)))]:
     if be.wavefront is not None:
         be.wavefront.max_paths = 60
     (a1, ta1), (b1, tb1) = [[v.copy() for v in h] for h in be.render_halves(2, 3, 1, 7, 5,
@@ -72,7 +84,7 @@ g.camera.resolution = (6, 5)
 gs = compile_scene(g)
 sort = {}
 for flag in (True, False):
-    be = CUDABackend(gs, wavefront=dict(wave_levels=None, sort_hits=flag))
+    be = small_cuda(gs, wavefront=dict(wave_levels=None, sort_hits=flag))
     img = be.render_pass(0, 3, 1, 7, 5)[0].copy()
     q = be.wavefront.queue_lengths()
     sort[str(flag)] = dict(img=img.tolist(), hits=q[1], hits_b=q[3])
@@ -89,7 +101,7 @@ from pathtracer import progressive
 from pathtracer.film import Film
 progressive.PIPELINE_SECONDS = float("inf")     # (the simulator's passes are slow)
 pipe = {}
-be = CUDABackend(s, wavefront=False)
+be = small_cuda(s, wavefront=False)
 ref = Film(5, 6)
 k = 0
 for n in (1, 2, 4):
@@ -114,7 +126,7 @@ pipe["again_equal"] = bool((again.film.sum == ref.sum).all())
 out["pipelined"] = pipe
 # Furnace on the simulator: L = Le * sum_{k<=3} a^k.
 f = load_scene(write_scene(tempfile.mkdtemp(), furnace_scene(0.5, 0.5, 3, res=(4, 4))))
-img, st = CUDABackend(f).render_pass(0, 24, 0, 3, 5)
+img, st = small_cuda(f).render_pass(0, 24, 0, 3, 5)
 px = (img / 24).reshape(-1, 3)
 out["furnace_mean"] = float(px.mean())
 out["furnace_se"] = float(px[:, 0].std(ddof=1) / np.sqrt(len(px)))

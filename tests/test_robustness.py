@@ -589,6 +589,57 @@ def test_concurrent_processes_keep_every_kernel_in_the_cache(tmp_path):
         assert out.split() == [str(k * 1000 + 7), "1"], f"kernel {k}: {out} {err}"
 
 
+LOCKER = textwrap.dedent("""
+    import os, sys, time
+    import pathtracer                      # configures the cache and its guards
+    from pathtracer._cache import compile_lock
+    folder, role = sys.argv[1], sys.argv[2]
+    sys.path.insert(0, folder)
+    import racer_mod
+    f = racer_mod.make(5)
+    t0 = time.monotonic()
+    with compile_lock("racer", f):
+        if role == "first":                # holds the lock a while, as a long compile does
+            open(os.path.join(folder, "holding"), "w").close()
+            time.sleep(3.0)
+        value = f()
+    print(value, sum(f.stats.cache_hits.values()), sum(f.stats.cache_misses.values()),
+          round(time.monotonic() - t0, 2))
+""")
+
+
+def test_a_kernel_another_process_is_compiling_is_waited_for_and_loaded(tmp_path):
+    """Two processes need the same new kernel: the second waits on the kernel's compile
+    lock (_cache.compile_lock) while the first compiles it, then loads it from the disk
+    cache instead of compiling it again (Ray workers on one machine each compiled the
+    scene's kernel, 20-40 s of a core apiece)."""
+    folder = tmp_path / "mod"
+    folder.mkdir()
+    (folder / "racer_mod.py").write_text(RACER_MOD)
+    env = dict(os.environ, PT_RENDER_CACHE=str(tmp_path / "cache"), PYTHONPATH=ROOT)
+    env.pop("NUMBA_CACHE_DIR", None)
+
+    def locker(role):
+        return subprocess.Popen([sys.executable, "-c", LOCKER, str(folder), role],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                env=env, cwd=str(tmp_path))
+    first = locker("first")
+    deadline = time.time() + 120
+    while not (folder / "holding").exists() and time.time() < deadline:
+        assert first.poll() is None, first.communicate()[1]
+        time.sleep(0.01)
+    second = locker("second")
+    out1, err1 = first.communicate(timeout=120)
+    out2, err2 = second.communicate(timeout=120)
+    assert first.returncode == 0 and second.returncode == 0, err1 + err2
+    value1, hits1, misses1, _ = out1.split()
+    value2, hits2, misses2, waited = out2.split()
+    assert value1 == value2 == "5007"
+    assert (hits1, misses1) == ("0", "1")          # the first compiled it
+    assert (hits2, misses2) == ("1", "0"), err2    # the second loaded it
+    assert float(waited) > 1.0                     # ... after waiting for the first
+
+
 KERNEL_PROBE = textwrap.dedent("""
     import sys
     import numpy as np

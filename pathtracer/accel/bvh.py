@@ -403,9 +403,11 @@ def _subtrees(t_lo, t_hi, order, deferred, deferred_box, n_def, offsets, sub_box
         hi = offsets[k + 1]
         none = np.zeros((1, 6), np.int64)
         none_box = np.zeros((1, 12))
+        # (defer as an int64, not the literal 0: a literal argument would make Numba
+        # compile a second _run for it, 7 s of the builder's ~20 s cold compile)
         nodes, depth, _ = _run(t_lo, t_hi, order, tasks, task_box, 1, sub_box[lo:hi],
                                sub_child[lo:hi], n_bins, max_leaf, min_leaf_split,
-                               midpoint, 0, none, none_box)
+                               midpoint, np.int64(0), none, none_box)
         sub_nodes[k] = nodes
         sub_depth[k] = depth
 

@@ -5,7 +5,7 @@ import functools
 import numpy as np
 from numba import get_num_threads, njit, prange
 
-from .._cache import jit_cache
+from .._cache import compile_lock, jit_cache
 
 from ..accel.wide import WIDE_STACK_SIZE, widen_bvh
 from ..kernels.device import FAST_MATH_FLAGS
@@ -35,6 +35,11 @@ def interleaved_row(k, rows_per, threads):
     contiguous range of k; this mapping gives thread j the rows j, j + threads, ..., so
     every thread gets rows from the whole image (the sky and the object), not one band."""
     return (k % rows_per) * threads + k // rows_per
+
+
+def feature_bits(features):
+    """A feature set as a string of 0s and 1s (the name of its kernels' compile lock)."""
+    return "".join("1" if f else "0" for f in features)
 
 
 @functools.lru_cache(maxsize=None)
@@ -114,8 +119,9 @@ class CPUBackend:
     def aovs(self, n_samples, seed):
         """The denoiser's albedo and normal images (float32 H x W x AOV_WIDTH, see aov_pixel)."""
         out = np.zeros((self.scene.height, self.scene.width, AOV_WIDTH), np.float32)
-        aov_kernel(self.scene.features)(out, n_samples, seed, self.arrays,
-                                        get_num_threads())
+        kernel = aov_kernel(self.scene.features)
+        with compile_lock("cpu-aov-" + feature_bits(self.scene.features), kernel):
+            kernel(out, n_samples, seed, self.arrays, get_num_threads())
         return out
 
     def render_pass(self, sample_start, n_samples, seed, max_bounces, rr_depth, active=None):
@@ -123,7 +129,15 @@ class CPUBackend:
         ``active`` (uint8 HxW, adaptive sampling): only the pixels where it is not 0."""
         # (the thread count is an argument: get_num_threads() inside the kernel is a
         # dynamic global, which Numba's disk cache refuses)
+        if not self.kernel.signatures:
+            # the first call compiles (or loads) the kernel: a pass of no samples, under the
+            # kernel's compile lock, so that a process waiting for it waits for no render
+            with compile_lock("cpu-pass-" + feature_bits(self.scene.features), self.kernel):
+                self._launch(0, 0, 0, 0, 0, None)
+        self._launch(sample_start, n_samples, seed, max_bounces, rr_depth, active)
+        return self.out, self.stats
+
+    def _launch(self, sample_start, n_samples, seed, max_bounces, rr_depth, active):
         self.kernel(self.out, self.stats, sample_start, n_samples, seed, max_bounces, rr_depth,
                     self.arrays, self.all_pixels if active is None else active,
                     get_num_threads())
-        return self.out, self.stats
