@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ._cache import jit_cache
+from ._cache import jit_cache, read_only
 from .kernels.layout import STAT_BOUNCE_RAYS, STAT_NONFINITE, STAT_SHADOW_RAYS
 
 FLOAT_FORMATS = (".hdr", ".exr", ".npy")
@@ -58,8 +58,10 @@ class Film:
             self.sum_b = np.zeros_like(self.sum)
             self.count_b = np.zeros_like(self.count)
         masked = active is not None
-        _accumulate(self.sum, self.count, pass_sum, n_samples,
-                    active if masked else _NO_MASK, masked,
+        # (the pass read-only, as it comes from a Ray worker: one compiled version, see
+        # _cache.read_only)
+        _accumulate(self.sum, self.count, read_only(pass_sum), n_samples,
+                    read_only(active) if masked else _NO_MASK, masked,
                     self.sum_b if half_b else self.sum, self.count_b if half_b else self.count,
                     half_b)
         self.spp += n_samples
@@ -79,6 +81,7 @@ class Film:
 
 
 _NO_MASK = np.ones((1, 1), np.uint8)
+_NO_MASK.flags.writeable = False
 
 
 @njit(cache=jit_cache())

@@ -11,7 +11,7 @@ CPU (bench/results/run-cpu-bvh-wide).
 import numpy as np
 from numba import njit
 
-from .._cache import jit_cache
+from .._cache import jit_cache, read_only
 from ..kernels.constants import STACK_SIZE
 from ..kernels.layout import (BOX_STRIDE, BOX_WIDTH, CHILD_COUNT, CHILD_INDEX, CHILD_STRIDE,
                               TRI_V_WIDTH)
@@ -203,6 +203,8 @@ def widen_bvh(tri_v, bvh_box, bvh_child, merge=LANES):
     """(wide, wchild) of kernels.wide from a scene's binary BVH arrays and triangles;
     subtrees of at most ``merge`` triangles become one leaf."""
     assert bvh_box.shape[1] == BOX_WIDTH and tri_v.shape[1] == TRI_V_WIDTH
+    # (read-only, as in a Ray worker: one compiled version, see _cache.read_only)
+    tri_v, bvh_box, bvh_child = read_only(tri_v), read_only(bvh_box), read_only(bvh_child)
     wbox, wchild, depth = _collapse(bvh_box, bvh_child, merge)
     assert 3 * depth + 1 <= WIDE_STACK_SIZE, depth
     return _pack(tri_v, wbox, wchild), wchild

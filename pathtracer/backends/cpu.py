@@ -5,7 +5,7 @@ import functools
 import numpy as np
 from numba import get_num_threads, njit, prange
 
-from .._cache import compile_lock, jit_cache
+from .._cache import compile_lock, jit_cache, read_only
 
 from ..accel.wide import WIDE_STACK_SIZE, widen_bvh
 from ..kernels.device import FAST_MATH_FLAGS
@@ -16,16 +16,18 @@ from ..kernels.integrator import make_aov_pixel, make_render_pixel
 def cpu_arrays(arrays, previous=None):
     """The CPU kernels' arrays: the scene's, with the four-wide BVH (kernels.wide) in the
     ``bvh_box`` and ``bvh_child`` slots (same array types: the kernels' signature does not
-    change), collapsed from the binary tree in 3 ms for the 69k-triangle bunny. ``previous``
-    ((binary arrays, wide arrays) of an earlier call): reused when the geometry is the same
-    arrays (an API re-render that changed a material or the camera). Returns (CPU arrays,
-    the pair to pass as ``previous`` next time)."""
+    change), collapsed from the binary tree in 3 ms for the 69k-triangle bunny; all of them
+    read-only views (``_cache.read_only``: the same kernel in a Ray worker, whose arrays are
+    read-only). ``previous`` ((binary arrays, wide arrays) of an earlier call): reused when
+    the geometry is the same arrays (an API re-render that changed a material or the
+    camera). Returns (CPU arrays, the pair to pass as ``previous`` next time)."""
     geometry = (arrays.tri_v, arrays.bvh_box, arrays.bvh_child)
     if previous is not None and all(a is b for a, b in zip(previous[0], geometry)):
         wide = previous[1]
     else:
         wide = widen_bvh(*geometry)
-    return arrays._replace(bvh_box=wide[0], bvh_child=wide[1]), (geometry, wide)
+    arrays = arrays._replace(bvh_box=wide[0], bvh_child=wide[1])
+    return type(arrays)(*(read_only(a) for a in arrays)), (geometry, wide)
 
 
 @njit(cache=jit_cache())
