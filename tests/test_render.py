@@ -364,7 +364,9 @@ def test_cpu_rows_interleaved_over_threads_give_the_same_image():
     scene = compile_scene(desc)
     render_pass, aov_pass = cpu.pass_kernel(scene.features), cpu.aov_kernel(scene.features)
     arrays = cpu.cpu_arrays(scene.arrays)[0]
-    active = np.ones((13, 20), np.uint8)
+    # (read-only, as the backend passes it: the backend's kernel, not another compile)
+    from pathtracer._cache import read_only
+    active = read_only(np.ones((13, 20), np.uint8))
     got = []
     for threads in (1, 2, 3, 7, 16):
         out = np.zeros((13, 20, 3), np.float32)

@@ -103,7 +103,7 @@ class CPUBackend:
         self.kernel = pass_kernel(scene.features)
         self.out = np.zeros((scene.height, scene.width, 3), np.float32)
         self.stats = np.zeros((scene.height, scene.width, 3), np.int32)
-        self.all_pixels = np.ones((scene.height, scene.width), np.uint8)
+        self.all_pixels = read_only(np.ones((scene.height, scene.width), np.uint8))
         self._compiled = False
 
     def update(self, scene):
@@ -140,6 +140,7 @@ class CPUBackend:
         return self.out, self.stats
 
     def _launch(self, sample_start, n_samples, seed, max_bounces, rr_depth, active):
+        # (the mask read-only, as from a Ray driver: one compiled kernel, _cache.read_only)
         self.kernel(self.out, self.stats, sample_start, n_samples, seed, max_bounces, rr_depth,
-                    self.arrays, self.all_pixels if active is None else active,
+                    self.arrays, self.all_pixels if active is None else read_only(active),
                     get_num_threads())
