@@ -176,6 +176,44 @@ def _quarantine(cache, error):
          "compiled afresh")
 
 
+def _flock(path, operation, make_folder=False, wait_seconds=None):
+    """A descriptor of ``path`` (created if missing) that holds ``flock(operation)``, or None
+    where no lock can be had (a folder that does not exist or cannot be written, a file
+    system without flock). ``wait_seconds``: poll for the lock (so that Ctrl-C ends the
+    wait) and give up after that long; None: block until it is free."""
+    fd = None
+    try:
+        if make_folder:
+            os.makedirs(os.path.dirname(path), exist_ok=True)
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        if wait_seconds is None:
+            fcntl.flock(fd, operation)
+            return fd
+        deadline = time.monotonic() + wait_seconds
+        while True:
+            try:
+                fcntl.flock(fd, operation | fcntl.LOCK_NB)
+                return fd
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    os.close(fd)
+                    return None
+                time.sleep(0.1)
+    except OSError:
+        if fd is not None:
+            os.close(fd)
+        return None
+
+
+@contextlib.contextmanager
+def _holding(fd):
+    try:
+        yield
+    finally:
+        if fd is not None:
+            os.close(fd)       # releases the lock
+
+
 @contextlib.contextmanager
 def index_lock(cache, exclusive):
     """Hold an ``flock`` on ``<index file>.lock`` of a Numba cache: shared while loading (the
@@ -185,20 +223,10 @@ def index_lock(cache, exclusive):
     index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
     fd = None
     if fcntl is not None and index is not None:
-        try:
-            if exclusive:
-                os.makedirs(os.path.dirname(index), exist_ok=True)
-            fd = os.open(index + ".lock", os.O_RDWR | os.O_CREAT, 0o644)
-            fcntl.flock(fd, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
-        except OSError:
-            if fd is not None:
-                os.close(fd)
-            fd = None
-    try:
+        fd = _flock(index + ".lock", fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH,
+                    make_folder=exclusive)
+    with _holding(fd):
         yield
-    finally:
-        if fd is not None:
-            os.close(fd)       # releases the lock
 
 
 # How long a process waits for another one's compile of the same kernel before it
@@ -216,35 +244,13 @@ def compile_lock(name, dispatcher):
     disk cache is off, or where no lock can be had (no fcntl, a read-only folder). The wait
     polls, so Ctrl-C ends it; after COMPILE_WAIT_SECONDS the kernel is compiled anyway."""
     folder = _state["folder"]
-    if (dispatcher.signatures or not _state["enabled"] or folder is None
-            or fcntl is None):
-        yield
-        return
     fd = None
-    try:
-        locks = os.path.join(folder, "compile-locks")
-        os.makedirs(locks, exist_ok=True)
-        fd = os.open(os.path.join(locks, name + ".lock"), os.O_RDWR | os.O_CREAT, 0o644)
-        deadline = time.monotonic() + COMPILE_WAIT_SECONDS
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except BlockingIOError:
-                if time.monotonic() > deadline:
-                    os.close(fd)
-                    fd = None
-                    break
-                time.sleep(0.1)
-    except OSError:
-        if fd is not None:
-            os.close(fd)
-        fd = None
-    try:
+    if not (dispatcher.signatures or not _state["enabled"] or folder is None
+            or fcntl is None):
+        fd = _flock(os.path.join(folder, "compile-locks", name + ".lock"), fcntl.LOCK_EX,
+                    make_folder=True, wait_seconds=COMPILE_WAIT_SECONDS)
+    with _holding(fd):
         yield
-    finally:
-        if fd is not None:
-            os.close(fd)       # releases the lock
 
 
 def _guarded(cls):
