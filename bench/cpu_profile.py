@@ -158,6 +158,9 @@ def profile(args):
         print(f"  {100 * s:5.1f}%  {name}")
     if args.annotate:
         found = [(addr, sym) for addr, _, sym in table if short_name(sym) == args.annotate]
+        if not found:   # a parfor's gufunc is named after its address, new each run
+            found = [(addr, sym) for addr, _, sym in table
+                     if short_name(sym).startswith(args.annotate)]
         for addr, sym in found:
             annotate(addr, bytes.fromhex(code_bytes[str(addr)]), per_ip, inside,
                      args.annotate_min)

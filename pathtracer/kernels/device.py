@@ -61,16 +61,26 @@ CPU_INLINED = set()
 KEEP_CALLS = frozenset(filter(None, os.environ.get("PT_RENDER_CPU_CALLS", "").split(",")))
 
 
-def _always_inlined(fn):
+def _always_inlined(fn, **options):
     if fn.__name__ in KEEP_CALLS:
-        return register_jitable(fn)
+        return register_jitable(**options)(fn)
     # a new register_jitable per function (see the module's docstring)
     CPU_INLINED.add(fn.__qualname__)
-    return register_jitable(forceinline=True)(fn)
+    return register_jitable(forceinline=True, **options)(fn)
 
 
-def entry_marker(target):
-    """The marker of the per-pixel and per-sample functions that the backends call."""
+def _always_inlined_entry(fn):
+    return _always_inlined(fn, _nrt=False)
+
+
+def entry_marker(target, inlined=False):
+    """The marker of the per-pixel and per-sample functions that the backends call.
+    ``inlined``: on the CPU inlined by LLVM into the caller, as the steps are (the one-path
+    function into the pixel's loop over samples, and that into the pass's loop over
+    pixels: a call passed the scene's arrays, ~200 words through the stack, once per
+    camera path; docs/benchmarks.md, "The path inlined into the pixel's loop")."""
     if target == "cpu":
+        if inlined:
+            return _always_inlined_entry
         return register_jitable(_nrt=False)
     return register_jitable

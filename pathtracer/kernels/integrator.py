@@ -103,6 +103,7 @@ def make_kernels(features, target="cpu"):
     S = specialise(features)
     step = step_marker(target)
     entry = entry_marker(target)
+    entry_inlined = entry_marker(target, inlined=True)
     THIN_LENS = S.thin_lens
     TRI_LIGHTS = S.tri_lights
     ANY_ENVIRONMENT = S.any_environment
@@ -346,7 +347,7 @@ def make_kernels(features, target="cpu"):
             n_bounce_rays += bounce_rays
         store_pixel(out, stats, px, py, r, g, b, n_bounce_rays, n_shadow_rays, n_bad)
 
-    @entry
+    @entry_inlined
     def render_sample(px, py, sample_index, seed, width, height, max_bounces, rr_depth,
                       scene, stack):
         """Radiance (r, g, b) of one camera path through pixel (px, py), with the number of
@@ -443,7 +444,7 @@ def make_kernels(features, target="cpu"):
                 break
         return radiance[0], radiance[1], radiance[2], n_bounce_rays, n_shadow_rays
 
-    @entry
+    @entry_inlined
     def render_pixel_nested(px, py, sample_start, n_samples, seed, max_bounces, rr_depth,
                             scene, stack, out, stats):
         """render_pixel's sums one path after the other (see regenerates)."""
