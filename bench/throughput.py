@@ -12,6 +12,7 @@ Writes a JSON record and prints a markdown table.
 
     python -m bench.throughput --cpu [--mitsuba] [--big-mesh PATH] [--json OUT]
     python -m bench.throughput --gpu [--mitsuba] [--json OUT]
+    python -m bench.throughput --cpu --scenes cornell-box bunny-studio sun [--rounds 3]
 """
 import argparse
 import json
@@ -21,17 +22,22 @@ import sys
 import tempfile
 import time
 
+import numpy as np
 
 from bench.common import (CORNELL, command, machine, median_time, mitsuba_cornell,
                           mitsuba_pass_times,
                           now, usable_mitsuba, versions)
 
 
-def ours(backend_name, resolution, spp_per_pass, repeats):
+def ours(backend_name, resolution, spp_per_pass, repeats, desc=None):
+    """pt-render's pass times on the Cornell box at ``resolution``, or on the scene
+    description ``desc`` (at its own resolution)."""
     from pathtracer.backends import make_backend
     from pathtracer.scene import compile_scene, load_scene_description
-    desc = load_scene_description(CORNELL)
-    desc.camera.resolution = resolution
+    if desc is None:
+        desc = load_scene_description(CORNELL)
+        desc.camera.resolution = resolution
+    resolution = desc.camera.resolution
     scene = compile_scene(desc)
     backend = make_backend(backend_name, scene)
     t0 = time.perf_counter()
@@ -78,6 +84,53 @@ def mitsuba(variant, resolution, spp, repeats):
     return {"renderer": f"Mitsuba {mi.__version__} {variant}", "resolution": list(resolution),
             "spp_per_pass": spp, "repeats": repeats, "pass_s_median": t, "pass_s_all": times,
             "paths_per_s": resolution[0] * resolution[1] * spp / t, "first_render_s": first}
+
+
+def convergence_scenes(names, spp, repeats, rounds):
+    """pt-render's CPU backend and Mitsuba llvm_ad_rgb on the convergence scenes ``names``
+    at their benchmark sizes (bench.scenes.CONVERGENCE; Mitsuba's scenes as the
+    convergence section renders them), in ``rounds`` rounds that alternate the two
+    renderers' order: this machine's speed drifts by 10-30 % over minutes, so only figures
+    taken side by side compare. Each round records each renderer's median pass."""
+    from bench.run import _mitsuba_scene
+    from bench.scenes import convergence_desc
+    out = []
+    ok, why = usable_mitsuba("llvm_ad_rgb")
+    if not ok:
+        print(f"throughput: Mitsuba llvm_ad_rgb cannot render here ({why})", file=sys.stderr)
+    for name in names:
+        desc = convergence_desc(name)
+        got = None
+        if ok:
+            import mitsuba as mi
+            mi.set_variant("llvm_ad_rgb")
+            got = _mitsuba_scene(name, "independent")
+        res = list(desc.camera.resolution)
+        paths = res[0] * res[1] * spp
+        rows = {"ours": [], "mitsuba": []}
+        for k in range(rounds):
+            order = ("ours", "mitsuba") if k % 2 == 0 else ("mitsuba", "ours")
+            for who in order:
+                if who == "ours":
+                    rows["ours"].append(ours("cpu", None, spp, repeats,
+                                             desc=convergence_desc(name))["paths_per_s"])
+                elif got is not None:
+                    _, t, _ = mitsuba_pass_times(got[0], spp, repeats)
+                    rows["mitsuba"].append(paths / t)
+        rec = {"scene": name, "resolution": res, "spp_per_pass": spp, "repeats": repeats,
+               "rounds": rounds, "pt_render_paths_per_s": rows["ours"],
+               "mitsuba_paths_per_s": rows["mitsuba"]}
+        if rows["mitsuba"]:
+            rec["ratio_of_medians"] = float(np.median(rows["ours"]) /
+                                            np.median(rows["mitsuba"]))
+            rec["ratio_per_round"] = [a / b for a, b in zip(rows["ours"], rows["mitsuba"])]
+        out.append(rec)
+        print(f"{name}: pt-render {np.median(rows['ours']) / 1e6:.3f} M paths/s"
+              + (f", Mitsuba {np.median(rows['mitsuba']) / 1e6:.3f}: "
+                 f"{rec['ratio_of_medians']:.3f}x (rounds "
+                 + ", ".join(f"{x:.3f}" for x in rec["ratio_per_round"]) + ")"
+                 if rows["mitsuba"] else ""), flush=True)
+    return out
 
 
 COMPILE_PROBE = r"""
@@ -147,11 +200,19 @@ def main():
     p.add_argument("--mitsuba", action="store_true", help="also measure Mitsuba 3")
     p.add_argument("--big-mesh", help="OBJ for load/BVH timings (make_big_mesh.py output)")
     p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--scenes", nargs="*", metavar="SCENE",
+                   help="with --cpu: instead, these convergence scenes (cornell-box, "
+                        "bunny-studio, textured, sun) at their benchmark sizes, pt-render's "
+                        "CPU backend and Mitsuba llvm_ad_rgb in alternating rounds")
+    p.add_argument("--rounds", type=int, default=3, help="rounds per scene (--scenes)")
+    p.add_argument("--spp", type=int, default=16, help="samples per pixel per pass (--scenes)")
     p.add_argument("--json", help="write the record here")
     a = p.parse_args()
     rec = {"command": command(), "machine": machine(), "date": now(), "versions": versions(),
            "results": []}
-    if a.cpu:
+    if a.cpu and a.scenes:
+        rec["scenes"] = convergence_scenes(a.scenes, a.spp, a.repeats, a.rounds)
+    elif a.cpu:
         rec["results"].append(ours("cpu", (256, 256), 16, a.repeats))
         if a.mitsuba:
             rec["results"].append(mitsuba("llvm_ad_rgb", (256, 256), 16, a.repeats))

@@ -63,7 +63,8 @@ KEEP_CALLS = frozenset(filter(None, os.environ.get("PT_RENDER_CPU_CALLS", "").sp
 
 def _always_inlined(fn, **options):
     if fn.__name__ in KEEP_CALLS:
-        return register_jitable(**options)(fn)
+        # (register_jitable() without options and without the function is an error)
+        return register_jitable(**options)(fn) if options else register_jitable(fn)
     # a new register_jitable per function (see the module's docstring)
     CPU_INLINED.add(fn.__qualname__)
     return register_jitable(forceinline=True, **options)(fn)
