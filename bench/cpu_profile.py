@@ -14,7 +14,8 @@ the table shows what remains a call (on the CPU most device functions are inline
 ``render_sample``; traversal, environment lookups and the principled evaluation are not).
 The child compiles into a fresh kernel cache (a kernel loaded from the disk cache keeps no
 object code to read the symbols from). ``--calls direct_light,sample_world`` keeps those
-steps as calls (they are inlined on the CPU), so that their shares show apart.
+steps (or other device functions) as calls (they are inlined on the CPU), so that their
+shares show apart.
 ``--annotate FUNCTION`` also prints that function's
 machine code (objdump) with each instruction's share. Needs ``perf``, ``nm`` and
 ``objdump`` (binutils); no hardware counters are needed (a VM works).
@@ -248,9 +249,10 @@ def main(argv=None):
     p.add_argument("--json")
     p.add_argument("--calls", type=lambda s: [w for w in s.split(",") if w], default=[],
                    metavar="STEP[,STEP]",
-                   help="integrator steps (kernels.device.step_marker) to keep as calls "
-                        "rather than inline, so that the table shows their share apart "
-                        "(the call itself costs a little: shares, not speeds)")
+                   help="integrator steps (kernels.device.step_marker) or other device "
+                        "functions (closest_hit_wide, any_hit_wide) to keep as calls rather "
+                        "than inline, so that the table shows their share apart (the call "
+                        "itself costs a little, the traversal's a lot: shares, not speeds)")
     p.add_argument("--annotate", metavar="FUNCTION",
                    help="also print this function's instructions with their sample shares "
                         "(a name as the table prints it, e.g. envmap.env_sample_lit)")

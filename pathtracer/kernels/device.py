@@ -55,9 +55,10 @@ def step_marker(target):
 CPU_INLINED = set()
 
 
-# A profiling aid (``python -m bench.cpu_profile --calls direct_light,...``): the steps
-# named here stay calls on the CPU, so that a profile shows their share apart. Part of the
-# kernel cache's key (pathtracer._cache.source_hash).
+# A profiling aid (``python -m bench.cpu_profile --calls direct_light,...``): the steps and
+# other device functions (e.g. closest_hit_wide) named here stay calls on the CPU, so that
+# a profile shows their share apart (see _cpu_calls_kept). Part of the kernel cache's key
+# (pathtracer._cache.source_hash).
 KEEP_CALLS = frozenset(filter(None, os.environ.get("PT_RENDER_CPU_CALLS", "").split(",")))
 
 
@@ -85,3 +86,30 @@ def entry_marker(target, inlined=False):
             return _always_inlined_entry
         return register_jitable(_nrt=False)
     return register_jitable
+
+
+
+def _cpu_calls_kept():
+    """Mark Numba's CPU calls of the KEEP_CALLS functions with LLVM's noinline call-site
+    attribute: LLVM inlines a called step, or the traversal, into the one function that the
+    pass's loop has become (everything but the pass loop itself is inlined there since
+    2026-11-28), and a profile then cannot show its share apart. Only for the profiling
+    aid: with PT_RENDER_CPU_CALLS unset nothing is patched."""
+    from numba.core.callconv import CPUCallConv
+    if getattr(CPUCallConv, "_pt_render_calls_kept", False):
+        return
+    original = CPUCallConv.call_function
+    # Itanium-style mangled names carry each name component with its length
+    marks = tuple(f"{len(name)}{name}" for name in KEEP_CALLS)
+
+    def call_function(self, builder, callee, resty, argtys, args, attrs=None):
+        if attrs is None and "pathtracer" in callee.name and any(
+                m in callee.name for m in marks):
+            attrs = ("noinline",)
+        return original(self, builder, callee, resty, argtys, args, attrs=attrs)
+    CPUCallConv.call_function = call_function
+    CPUCallConv._pt_render_calls_kept = True
+
+
+if KEEP_CALLS:
+    _cpu_calls_kept()
