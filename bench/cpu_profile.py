@@ -10,8 +10,8 @@ of the samples inside the kernel's own code (compilation, Python and the thread 
 counted apart as "outside"; of the samples taken while it renders, those outside the
 kernel's code are listed by library: libm, Numba's helpers, the thread pool). Functions
 that Numba/LLVM inlined are counted in their caller:
-the table shows what remains a call (on the CPU most device functions are inlined into
-``render_sample``; traversal, environment lookups and the principled evaluation are not).
+the table shows what remains a call (on the CPU everything is inlined into the pass's
+loop, the parfor's gufunc, since 2026-11-28: use ``--calls``).
 The child compiles into a fresh kernel cache (a kernel loaded from the disk cache keeps no
 object code to read the symbols from). ``--calls direct_light,sample_world`` keeps those
 steps (or other device functions) as calls (they are inlined on the CPU), so that their
