@@ -176,11 +176,12 @@ def _quarantine(cache, error):
          "compiled afresh")
 
 
-def _flock(path, operation, make_folder=False, wait_seconds=None):
+def _flock(path, operation, make_folder=False, wait_seconds=None, on_wait=None):
     """A descriptor of ``path`` (created if missing) that holds ``flock(operation)``, or None
     where no lock can be had (a folder that does not exist or cannot be written, a file
     system without flock). ``wait_seconds``: poll for the lock (so that Ctrl-C ends the
-    wait) and give up after that long; None: block until it is free."""
+    wait) and give up after that long, calling ``on_wait()`` once when the lock is taken;
+    None: block until it is free."""
     fd = None
     try:
         if make_folder:
@@ -195,6 +196,9 @@ def _flock(path, operation, make_folder=False, wait_seconds=None):
                 fcntl.flock(fd, operation | fcntl.LOCK_NB)
                 return fd
             except BlockingIOError:
+                if on_wait is not None:
+                    on_wait()
+                    on_wait = None
                 if time.monotonic() > deadline:
                     os.close(fd)
                     return None
@@ -242,13 +246,20 @@ def compile_lock(name, dispatcher):
     process compiling the same kernel finishes first and this one loads its result from
     the disk cache. Nothing is locked once the dispatcher has a compiled signature, when the
     disk cache is off, or where no lock can be had (no fcntl, a read-only folder). The wait
-    polls, so Ctrl-C ends it; after COMPILE_WAIT_SECONDS the kernel is compiled anyway."""
+    polls, so Ctrl-C ends it; after COMPILE_WAIT_SECONDS the kernel is compiled anyway. A
+    process that has to wait says so on stderr, once."""
     folder = _state["folder"]
     fd = None
     if not (dispatcher.signatures or not _state["enabled"] or folder is None
             or fcntl is None):
-        fd = _flock(os.path.join(folder, "compile-locks", name + ".lock"), fcntl.LOCK_EX,
-                    make_folder=True, wait_seconds=COMPILE_WAIT_SECONDS)
+        path = os.path.join(folder, "compile-locks", name + ".lock")
+
+        def on_wait():     # (else a long wait looks like a hang)
+            print(f"pt-render: waiting for another process that is compiling the same "
+                  f"kernel ({path}); it will then be loaded from the disk cache",
+                  file=sys.stderr, flush=True)
+        fd = _flock(path, fcntl.LOCK_EX, make_folder=True,
+                    wait_seconds=COMPILE_WAIT_SECONDS, on_wait=on_wait)
     with _holding(fd):
         yield
 

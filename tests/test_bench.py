@@ -315,3 +315,24 @@ def test_traversal_benchmark_on_the_cuda_simulator(tmp_path):
     rec = json.loads(out.read_text())
     assert rec["same_hits"] and rec["backend"] == "cuda"
     assert set(rec["results"]) == {"binary", "four-wide"}
+
+
+def test_throughput_on_the_convergence_scenes_alternates_rounds(monkeypatch):
+    """`python -m bench.throughput --cpu --scenes ...`: a figure per round for pt-render,
+    at the scene's benchmark size; without a usable Mitsuba the peer's rounds are left
+    out, and so is the ratio (never a ratio to nothing)."""
+    import bench.throughput as tp
+    monkeypatch.setattr(tp, "usable_mitsuba", lambda variant: (False, "not here"))
+    calls = []
+    real_ours = tp.ours
+
+    def ours(*args, **kw):
+        calls.append(kw["desc"].camera.resolution)
+        return real_ours(*args, **kw)
+    monkeypatch.setattr(tp, "ours", ours)
+    (rec,) = tp.convergence_scenes(["cornell-box"], spp=1, repeats=1, rounds=2)
+    assert rec["scene"] == "cornell-box" and rec["rounds"] == 2
+    assert calls == [(256, 256), (256, 256)] and rec["resolution"] == [256, 256]
+    assert len(rec["pt_render_paths_per_s"]) == 2
+    assert all(x > 0 for x in rec["pt_render_paths_per_s"])
+    assert rec["mitsuba_paths_per_s"] == [] and "ratio_of_medians" not in rec

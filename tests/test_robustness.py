@@ -638,6 +638,8 @@ def test_a_kernel_another_process_is_compiling_is_waited_for_and_loaded(tmp_path
     assert (hits1, misses1) == ("0", "1")          # the first compiled it
     assert (hits2, misses2) == ("1", "0"), err2    # the second loaded it
     assert float(waited) > 1.0                     # ... after waiting for the first
+    assert "waiting for another process" in err2, err2     # ... and said so
+    assert "waiting" not in err1, err1
 
 
 KERNEL_PROBE = textwrap.dedent("""

@@ -88,7 +88,6 @@ def entry_marker(target, inlined=False):
     return register_jitable
 
 
-
 def _cpu_calls_kept():
     """Mark Numba's CPU calls of the KEEP_CALLS functions with LLVM's noinline call-site
     attribute: LLVM inlines a called step, or the traversal, into the one function that the
