@@ -10,7 +10,7 @@ from pathtracer.backends import make_backend
 from pathtracer.film import relmse
 from pathtracer.progressive import render
 from pathtracer.scene import SceneError, load_scene
-from tests.conftest import BACKENDS, ROOT, SHARED, gpu, needs_shared
+from tests.conftest import BACKENDS, ROOT, SHARED, gpu
 from tests.helpers import furnace_scene, mean_and_se, run, write_scene
 
 CORNELL = os.path.join(ROOT, "scenes", "cornell-box.json")
@@ -19,7 +19,8 @@ REF_NOISE = 1.95e-5          # the reference's own relMSE (reference_256_d8.json
 MITSUBA_RELMSE_SPP = 0.28    # Mitsuba independent sampler: relMSE ~ 0.28 / spp
 
 
-@needs_shared
+# (the GPU machine's bundle of ../shared may leave the reference out: a skip, not an error)
+@pytest.mark.skipif(not os.path.isfile(CORNELL_REF), reason="needs ../shared/reference")
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_cornell_box_matches_mitsuba(backend):
     spp = 64 if backend == "cpu" else 1024
