@@ -180,8 +180,8 @@ def _flock(path, operation, make_folder=False, wait_seconds=None, on_wait=None):
     """A descriptor of ``path`` (created if missing) that holds ``flock(operation)``, or None
     where no lock can be had (a folder that does not exist or cannot be written, a file
     system without flock). ``wait_seconds``: poll for the lock (so that Ctrl-C ends the
-    wait) and give up after that long, calling ``on_wait()`` once when the lock is taken;
-    None: block until it is free."""
+    wait) and give up after that long, calling ``on_wait()`` once if another holder makes
+    it wait; None: block until it is free."""
     fd = None
     try:
         if make_folder:
