@@ -6,13 +6,19 @@ are measured by the same benchmark code on the same scene descriptions (this tre
 ``bench.scenes``).
 
     python -m bench.ab throughput --trees OLD NEW [--backend cpu|cuda] [--scenes ...]
+    python -m bench.ab throughput --trees OLD NEW --paired 40 [--scenes ...]
     python -m bench.ab images --trees OLD NEW [--spp 4] [--resolution 96x72]
 
 ``throughput``: camera paths/s per scene, the median of ``--repeats`` passes after a warm-up
 pass, compile excluded; trees alternate for ``--rounds`` rounds (drift on a shared machine
-hits both) and each tree's figure is the median over its rounds. ``images``: every scene of
-``scenes/`` and of the error-against-time study rendered on the CPU with each tree; the
-float32 pixel sums are compared bit for bit.
+hits both) and each tree's figure is the median over its rounds. ``--paired N`` instead
+keeps one worker per tree alive and alternates them, N pairs (A B, B A, ...; never both
+at once; each turn an untimed pass, then the timed one): the two timed passes of a pair are seconds apart, so the ratio of their
+times hardly sees the machine's drift, which moves whole rounds by 10-35 % on the 2-core
+CPU. It reports the median of the N per-pair ratios with a bootstrap 95 % interval: on that
+machine +-2-3 % with 40 pairs, where rounds of separate processes left +-5-10 %.
+``images``: every scene of ``scenes/`` and of the error-against-time study rendered on the
+CPU with each tree; the float32 pixel sums are compared bit for bit.
 """
 import argparse
 import glob
@@ -120,6 +126,19 @@ def worker(args):
         start[0] += args.spp
 
     one_pass()
+    if args.mode == "serve":
+        # per line read ("pass"): an untimed pass, then a timed one, whose time is printed
+        # back; end of input: done. (The first pass after the other tree's turn runs with
+        # cold caches and sleeping threads: 2x slower at small sizes on the 2-core CPU.)
+        print(json.dumps(out), flush=True)
+        for line in sys.stdin:
+            if line.strip() != "pass":
+                break
+            one_pass()
+            t = time.perf_counter()
+            one_pass()
+            print(json.dumps({"pass_s": time.perf_counter() - t}), flush=True)
+        return
     times = []
     for _ in range(args.repeats):
         t = time.perf_counter()
@@ -146,6 +165,72 @@ def _run_worker(tree, scene, backend, resolution, spp, mode, repeats=0, save=Non
     return json.loads(p.stdout.strip().splitlines()[-1])
 
 
+class _Server:
+    """A worker in ``serve`` mode: compiled and warmed up, then one pass per request."""
+
+    def __init__(self, tree, scene, backend, resolution, spp, options=None):
+        cmd = [sys.executable, "-m", "bench.ab", "_worker", "--tree", tree, "--scene", scene,
+               "--backend", backend, "--resolution", "%dx%d" % tuple(resolution), "--spp",
+               str(spp), "--mode", "serve"]
+        if options:
+            cmd += ["--options", options]
+        self.cmd = cmd
+        self.proc = subprocess.Popen(cmd, cwd=ROOT, stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, text=True, bufsize=1)
+        self.info = self._reply()
+
+    def _reply(self):
+        for line in self.proc.stdout:
+            line = line.strip()
+            if line.startswith("{"):
+                return json.loads(line)
+        raise SystemExit(f"bench.ab: worker ended early: {' '.join(self.cmd)}")
+
+    def time_pass(self):
+        self.proc.stdin.write("pass\n")
+        return self._reply()["pass_s"]
+
+    def close(self):
+        self.proc.stdin.close()
+        self.proc.wait()
+
+
+def bootstrap_median_interval(values, n=4000, seed=0):
+    """The 2.5 and 97.5 percentiles of the median of ``values`` resampled with replacement."""
+    v = np.asarray(values, float)
+    meds = np.median(np.random.default_rng(seed).choice(v, (n, len(v))), axis=1)
+    return float(np.percentile(meds, 2.5)), float(np.percentile(meds, 97.5))
+
+
+def paired(args, name, res, spp, record):
+    """``throughput --paired``: the two trees' passes alternate in live workers."""
+    servers = [_Server(t, name, args.backend, res, spp, args.options) for t in args.trees]
+    try:
+        times = [[], []]
+        for k in range(args.paired):
+            for i in ((0, 1) if k % 2 == 0 else (1, 0)):
+                times[i].append(servers[i].time_pass())
+    finally:
+        for s in servers:
+            s.close()
+    paths = res[0] * res[1] * spp
+    ratios = [a / b for a, b in zip(*times)]       # B's paths/s over A's, pair by pair
+    lo, hi = bootstrap_median_interval(ratios)
+    labels = args.trees if args.trees[0] != args.trees[1] else [
+        f"{t} ({k + 1})" for k, t in enumerate(args.trees)]
+    per_tree = {t: paths / statistics.median(ts) for t, ts in zip(labels, times)}
+    for s, ts in zip(servers, times):
+        record["results"].append(dict(s.info, pass_s=ts,
+                                      paths_per_s=paths / statistics.median(ts)))
+    ratio = statistics.median(ratios)
+    print(f"{name:14s} {args.backend:5s} " + "  ".join(
+        f"{t}: {per_tree[t] / 1e6:8.3f} M paths/s" for t in labels) +
+        f"   ratio {ratio:.3f} (95 % {lo:.3f}-{hi:.3f}, {args.paired} pairs)", flush=True)
+    record.setdefault("summary", {})[name] = {
+        "paths_per_s": per_tree, "ratio": ratio, "ratio_interval_95": [lo, hi],
+        "pairs": args.paired, "pair_ratios": ratios}
+
+
 def throughput(args):
     from bench.common import command, machine, now, versions
     table = THROUGHPUT[args.backend]
@@ -155,6 +240,12 @@ def throughput(args):
               "results": []}
     for name in scenes:
         res, spp = table[name]
+        if args.resolution:
+            res = tuple(int(x) for x in args.resolution.split("x"))
+        spp = args.spp or spp
+        if args.paired:
+            paired(args, name, res, spp, record)
+            continue
         per_tree = {t: [] for t in args.trees}
         for r in range(args.rounds):
             order = args.trees if r % 2 == 0 else args.trees[::-1]
@@ -214,6 +305,12 @@ def main(argv=None):
     t.add_argument("--scenes", nargs="*")
     t.add_argument("--repeats", type=int, default=5)
     t.add_argument("--rounds", type=int, default=2)
+    t.add_argument("--paired", type=int, default=0, metavar="N",
+                   help="N pairs of passes from two live workers, alternating (instead of "
+                        "--rounds and --repeats): the per-pair ratio's median and interval")
+    t.add_argument("--resolution", help="WxH instead of the scene's benchmark size")
+    t.add_argument("--spp", type=int, help="samples per pixel per pass (default: the "
+                   "scene's)")
     t.add_argument("--json")
     t.add_argument("--options", help='backend options of the trees that take them, as JSON '
                    '(e.g. \'{"target_threads": 1}\')')

@@ -301,19 +301,38 @@ def test_watertight_counts_rays_that_slip_through():
     assert (tri >= 0).all() and occluded.all()
 
 
+def test_traversal_rays_in_origin_order_are_the_random_ones_sorted():
+    """bench.traversal --order origin traces the rays of the default random order, sorted
+    by the triangle they leave (each ray keeping its origin and direction)."""
+    from bench.traversal import make_rays
+    tri_v = np.random.default_rng(0).random((50, 9)).astype(np.float32)
+    o_r, d_r, s_r = make_rays(tri_v, 500, "random")
+    o_s, d_s, s_s = make_rays(tri_v, 500, "origin")
+    assert (np.diff(s_s) >= 0).all() and not (np.diff(s_r) >= 0).all()
+
+    def rays(o, d, s):
+        return sorted(zip(s.tolist(), map(tuple, d.tolist()), map(tuple, o.tolist())))
+    assert rays(o_r, d_r, s_r) == rays(o_s, d_s, s_s)
+    # every ray starts at the centroid of the triangle it leaves
+    v = tri_v[s_s]
+    assert np.allclose(o_s, v[:, 0:3] + (v[:, 3:6] + v[:, 6:9]) / 3, atol=1e-6)
+
+
 def test_traversal_benchmark_on_the_cuda_simulator(tmp_path):
     """bench.traversal --backend cuda (both trees' traversal as CUDA kernels, one ray per
-    thread), run on the CUDA simulator: the two trees find the same hits."""
+    thread), run on the CUDA simulator: the two trees find the same hits (the rays in
+    --order origin)."""
     import json
     import os
     out = tmp_path / "t.json"
     r = subprocess.run([sys.executable, "-m", "bench.traversal", "cornell-box", "--backend",
-                        "cuda", "--rays", "300", "--repeats", "1", "--json", str(out)],
+                        "cuda", "--rays", "300", "--repeats", "1", "--order", "origin",
+                        "--json", str(out)],
                        cwd=ROOT, env=dict(os.environ, NUMBA_ENABLE_CUDASIM="1"),
                        capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     rec = json.loads(out.read_text())
-    assert rec["same_hits"] and rec["backend"] == "cuda"
+    assert rec["same_hits"] and rec["backend"] == "cuda" and rec["order"] == "origin"
     assert set(rec["results"]) == {"binary", "four-wide"}
 
 
@@ -336,3 +355,32 @@ def test_throughput_on_the_convergence_scenes_alternates_rounds(monkeypatch):
     assert len(rec["pt_render_paths_per_s"]) == 2
     assert all(x > 0 for x in rec["pt_render_paths_per_s"])
     assert rec["mitsuba_paths_per_s"] == [] and "ratio_of_medians" not in rec
+
+
+def test_ab_paired_alternates_live_workers(tmp_path):
+    """`python -m bench.ab throughput --paired N`: one live worker per tree, their timed
+    passes alternating; the record has N times per tree and N pair ratios, the median's
+    bootstrap interval around the median (a tree against itself, on a tiny image)."""
+    import json
+    out = tmp_path / "ab.json"
+    r = subprocess.run([sys.executable, "-m", "bench.ab", "throughput", "--trees", ".", ".",
+                        "--paired", "4", "--scenes", "cornell-box", "--resolution", "32x24",
+                        "--spp", "1", "--json", str(out)],
+                       cwd=ROOT, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-2000:]
+    rec = json.loads(out.read_text())
+    s = rec["summary"]["cornell-box"]
+    assert s["pairs"] == 4 and len(s["pair_ratios"]) == 4
+    assert s["ratio_interval_95"][0] <= s["ratio"] <= s["ratio_interval_95"][1]
+    assert [len(x["pass_s"]) for x in rec["results"]] == [4, 4]
+    assert all(x["resolution"] == [32, 24] and x["spp"] == 1 for x in rec["results"])
+    assert "ratio" in r.stdout and "4 pairs" in r.stdout
+
+
+def test_bootstrap_median_interval():
+    from bench.ab import bootstrap_median_interval
+    lo, hi = bootstrap_median_interval([1.0] * 10)
+    assert lo == hi == 1.0
+    v = np.random.default_rng(3).normal(1.0, 0.05, 200)
+    lo, hi = bootstrap_median_interval(v)
+    assert lo < np.median(v) < hi and hi - lo < 0.05
