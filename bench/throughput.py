@@ -29,17 +29,26 @@ from bench.common import (CORNELL, command, machine, median_time, mitsuba_cornel
                           now, usable_mitsuba, versions)
 
 
-def ours(backend_name, resolution, spp_per_pass, repeats, desc=None):
-    """pt-render's pass times on the Cornell box at ``resolution``, or on the scene
-    description ``desc`` (at its own resolution)."""
+def prepare(backend_name, desc):
+    """(scene, backend) of a scene description, for :func:`ours`."""
     from pathtracer.backends import make_backend
-    from pathtracer.scene import compile_scene, load_scene_description
-    if desc is None:
-        desc = load_scene_description(CORNELL)
-        desc.camera.resolution = resolution
-    resolution = desc.camera.resolution
+    from pathtracer.scene import compile_scene
     scene = compile_scene(desc)
-    backend = make_backend(backend_name, scene)
+    return scene, make_backend(backend_name, scene)
+
+
+def ours(backend_name, resolution, spp_per_pass, repeats, desc=None, prepared=None):
+    """pt-render's pass times on the Cornell box at ``resolution``, or on the scene
+    description ``desc`` (at its own resolution), or with ``prepared`` (scene, backend)
+    of :func:`prepare` (its BVH built and kernel compiled once for several calls)."""
+    from pathtracer.scene import load_scene_description
+    if prepared is None:
+        if desc is None:
+            desc = load_scene_description(CORNELL)
+            desc.camera.resolution = resolution
+        prepared = prepare(backend_name, desc)
+    scene, backend = prepared
+    resolution = (scene.width, scene.height)
     t0 = time.perf_counter()
     backend.compile()
     compile_s = time.perf_counter() - t0
@@ -107,13 +116,14 @@ def convergence_scenes(names, spp, repeats, rounds):
             got = _mitsuba_scene(name, "independent")
         res = list(desc.camera.resolution)
         paths = res[0] * res[1] * spp
+        prepared = prepare("cpu", desc)     # (the BVH and the kernel once, not each round)
         rows = {"ours": [], "mitsuba": []}
         for k in range(rounds):
             order = ("ours", "mitsuba") if k % 2 == 0 else ("mitsuba", "ours")
             for who in order:
                 if who == "ours":
                     rows["ours"].append(ours("cpu", None, spp, repeats,
-                                             desc=convergence_desc(name))["paths_per_s"])
+                                             prepared=prepared)["paths_per_s"])
                 elif got is not None:
                     _, t, _ = mitsuba_pass_times(got[0], spp, repeats)
                     rows["mitsuba"].append(paths / t)

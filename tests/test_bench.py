@@ -339,19 +339,22 @@ def test_traversal_benchmark_on_the_cuda_simulator(tmp_path):
 def test_throughput_on_the_convergence_scenes_alternates_rounds(monkeypatch):
     """`python -m bench.throughput --cpu --scenes ...`: a figure per round for pt-render,
     at the scene's benchmark size; without a usable Mitsuba the peer's rounds are left
-    out, and so is the ratio (never a ratio to nothing)."""
+    out, and so is the ratio (never a ratio to nothing). The scene is built and its kernel
+    loaded once for all rounds."""
     import bench.throughput as tp
     monkeypatch.setattr(tp, "usable_mitsuba", lambda variant: (False, "not here"))
     calls = []
     real_ours = tp.ours
 
     def ours(*args, **kw):
-        calls.append(kw["desc"].camera.resolution)
+        calls.append(kw["prepared"])
         return real_ours(*args, **kw)
     monkeypatch.setattr(tp, "ours", ours)
     (rec,) = tp.convergence_scenes(["cornell-box"], spp=1, repeats=1, rounds=2)
     assert rec["scene"] == "cornell-box" and rec["rounds"] == 2
-    assert calls == [(256, 256), (256, 256)] and rec["resolution"] == [256, 256]
+    assert len(calls) == 2 and calls[0] is calls[1]
+    scene = calls[0][0]
+    assert (scene.width, scene.height) == (256, 256) and rec["resolution"] == [256, 256]
     assert len(rec["pt_render_paths_per_s"]) == 2
     assert all(x > 0 for x in rec["pt_render_paths_per_s"])
     assert rec["mitsuba_paths_per_s"] == [] and "ratio_of_medians" not in rec
