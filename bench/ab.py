@@ -191,7 +191,10 @@ class _Server:
         return self._reply()["pass_s"]
 
     def close(self):
-        self.proc.stdin.close()
+        try:
+            self.proc.stdin.close()
+        except OSError:             # (a worker that died: nothing to tell it)
+            pass
         self.proc.wait()
 
 
@@ -204,8 +207,10 @@ def bootstrap_median_interval(values, n=4000, seed=0):
 
 def paired(args, name, res, spp, record):
     """``throughput --paired``: the two trees' passes alternate in live workers."""
-    servers = [_Server(t, name, args.backend, res, spp, args.options) for t in args.trees]
+    servers = []
     try:
+        for t in args.trees:
+            servers.append(_Server(t, name, args.backend, res, spp, args.options))
         times = [[], []]
         for k in range(args.paired):
             for i in ((0, 1) if k % 2 == 0 else (1, 0)):

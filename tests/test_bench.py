@@ -380,6 +380,17 @@ def test_ab_paired_alternates_live_workers(tmp_path):
     assert "ratio" in r.stdout and "4 pairs" in r.stdout
 
 
+def test_ab_paired_stops_on_a_tree_that_fails(tmp_path):
+    """A tree whose worker cannot start (here: no pt-render in it) ends the run with a
+    message naming the worker; the other tree's worker is not left behind."""
+    r = subprocess.run([sys.executable, "-m", "bench.ab", "throughput", "--trees", ".",
+                        str(tmp_path), "--paired", "2", "--scenes", "cornell-box",
+                        "--resolution", "16x16", "--spp", "1"],
+                       cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert r.returncode != 0
+    assert "worker ended early" in r.stderr and str(tmp_path) in r.stderr
+
+
 def test_bootstrap_median_interval():
     from bench.ab import bootstrap_median_interval
     lo, hi = bootstrap_median_interval([1.0] * 10)
