@@ -12,11 +12,13 @@ are measured by the same benchmark code on the same scene descriptions (this tre
 ``throughput``: camera paths/s per scene, the median of ``--repeats`` passes after a warm-up
 pass, compile excluded; trees alternate for ``--rounds`` rounds (drift on a shared machine
 hits both) and each tree's figure is the median over its rounds. ``--paired N`` instead
-keeps one worker per tree alive and alternates them, N pairs (A B, B A, ...; never both
-at once; each turn an untimed pass, then the timed one): the two timed passes of a pair are seconds apart, so the ratio of their
-times hardly sees the machine's drift, which moves whole rounds by 10-35 % on the 2-core
-CPU. It reports the median of the N per-pair ratios with a bootstrap 95 % interval: on that
-machine +-2-3 % with 40 pairs, where rounds of separate processes left +-5-10 %.
+keeps one worker per tree alive and alternates them, N pairs (A B, B A, ...; never both at
+once; each turn an untimed pass, then the timed one): the two timed passes of a pair are
+seconds apart, so the ratio of their times hardly sees the machine's drift, which moves
+whole rounds by 10-35 % on the 2-core CPU. It reports the median of the N per-pair ratios
+with a bootstrap 95 % interval: a tree against itself gave intervals of +-3-4 % there with
+40 pairs (rounds of separate processes: +-5-10 %), and a few tenths of a per cent on an
+H200 (docs/benchmarks.md, 2026-11-28).
 ``images``: every scene of ``scenes/`` and of the error-against-time study rendered on the
 CPU with each tree; the float32 pixel sums are compared bit for bit.
 """
