@@ -151,8 +151,9 @@ def worker(args):
     print(json.dumps(out))
 
 
-def _run_worker(tree, scene, backend, resolution, spp, mode, repeats=0, save=None,
+def _worker_cmd(tree, scene, backend, resolution, spp, mode, repeats=0, save=None,
                 options=None):
+    """The command line of one worker (``_worker``) for ``tree``."""
     cmd = [sys.executable, "-m", "bench.ab", "_worker", "--tree", tree, "--scene", scene,
            "--backend", backend, "--resolution", "%dx%d" % tuple(resolution), "--spp",
            str(spp), "--mode", mode, "--repeats", str(repeats)]
@@ -160,6 +161,12 @@ def _run_worker(tree, scene, backend, resolution, spp, mode, repeats=0, save=Non
         cmd += ["--options", options]
     if save:
         cmd += ["--save", save]
+    return cmd
+
+
+def _run_worker(tree, scene, backend, resolution, spp, mode, repeats=0, save=None,
+                options=None):
+    cmd = _worker_cmd(tree, scene, backend, resolution, spp, mode, repeats, save, options)
     p = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
     if p.returncode != 0:
         sys.stderr.write(p.stderr)
@@ -171,11 +178,7 @@ class _Server:
     """A worker in ``serve`` mode: compiled and warmed up, then one pass per request."""
 
     def __init__(self, tree, scene, backend, resolution, spp, options=None):
-        cmd = [sys.executable, "-m", "bench.ab", "_worker", "--tree", tree, "--scene", scene,
-               "--backend", backend, "--resolution", "%dx%d" % tuple(resolution), "--spp",
-               str(spp), "--mode", "serve"]
-        if options:
-            cmd += ["--options", options]
+        cmd = _worker_cmd(tree, scene, backend, resolution, spp, "serve", options=options)
         self.cmd = cmd
         self.proc = subprocess.Popen(cmd, cwd=ROOT, stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, text=True, bufsize=1)
@@ -247,8 +250,7 @@ def throughput(args):
               "results": []}
     for name in scenes:
         res, spp = table[name]
-        if args.resolution:
-            res = tuple(int(x) for x in args.resolution.split("x"))
+        res = args.resolution or res
         spp = args.spp or spp
         if args.paired:
             paired(args, name, res, spp, record)
@@ -282,7 +284,7 @@ def images(args):
                    for p in glob.glob(os.path.join(ROOT, "scenes", "*.json")))
     names += ["bunny-studio", "sun"]
     names = args.scenes or names
-    res = tuple(int(x) for x in args.resolution.split("x"))
+    res = args.resolution
     out = args.out
     os.makedirs(out, exist_ok=True)
     failures = 0
@@ -303,6 +305,17 @@ def images(args):
         raise SystemExit(f"bench.ab: {failures} scene(s) differ")
 
 
+def _size(text):
+    """``WxH`` as (W, H)."""
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not WIDTHxHEIGHT (e.g. 96x72)")
+    if w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: width and height must be positive")
+    return w, h
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m bench.ab", description=__doc__.split("\n")[0])
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -315,7 +328,8 @@ def main(argv=None):
     t.add_argument("--paired", type=int, default=0, metavar="N",
                    help="N pairs of passes from two live workers, alternating (instead of "
                         "--rounds and --repeats): the per-pair ratio's median and interval")
-    t.add_argument("--resolution", help="WxH instead of the scene's benchmark size")
+    t.add_argument("--resolution", type=_size, help="WxH instead of the scene's benchmark "
+                   "size")
     t.add_argument("--spp", type=int, help="samples per pixel per pass (default: the "
                    "scene's)")
     t.add_argument("--json")
@@ -325,7 +339,7 @@ def main(argv=None):
     i.add_argument("--trees", nargs=2, required=True)
     i.add_argument("--scenes", nargs="*")
     i.add_argument("--spp", type=int, default=4)
-    i.add_argument("--resolution", default="96x72")
+    i.add_argument("--resolution", type=_size, default="96x72")
     i.add_argument("--out", default=os.path.join(ROOT, "bench", "out", "ab-images"))
     i.add_argument("--reuse", action="store_true",
                    help="reuse the first tree's images saved by an earlier run in --out")

@@ -24,6 +24,7 @@ import time
 
 import numpy as np
 
+from bench.scenes import CONVERGENCE
 from bench.common import (CORNELL, command, machine, median_time, mitsuba_cornell,
                           mitsuba_pass_times,
                           now, usable_mitsuba, versions)
@@ -37,15 +38,14 @@ def prepare(backend_name, desc):
     return scene, make_backend(backend_name, scene)
 
 
-def ours(backend_name, resolution, spp_per_pass, repeats, desc=None, prepared=None):
-    """pt-render's pass times on the Cornell box at ``resolution``, or on the scene
-    description ``desc`` (at its own resolution), or with ``prepared`` (scene, backend)
-    of :func:`prepare` (its BVH built and kernel compiled once for several calls)."""
-    from pathtracer.scene import load_scene_description
+def ours(backend_name, resolution, spp_per_pass, repeats, prepared=None):
+    """pt-render's pass times on the Cornell box at ``resolution``, or with ``prepared``
+    (scene, backend) of :func:`prepare` (any scene at its own resolution, its BVH built and
+    kernel compiled once for several calls)."""
     if prepared is None:
-        if desc is None:
-            desc = load_scene_description(CORNELL)
-            desc.camera.resolution = resolution
+        from pathtracer.scene import load_scene_description
+        desc = load_scene_description(CORNELL)
+        desc.camera.resolution = resolution
         prepared = prepare(backend_name, desc)
     scene, backend = prepared
     resolution = (scene.width, scene.height)
@@ -210,14 +210,16 @@ def main():
     p.add_argument("--mitsuba", action="store_true", help="also measure Mitsuba 3")
     p.add_argument("--big-mesh", help="OBJ for load/BVH timings (make_big_mesh.py output)")
     p.add_argument("--repeats", type=int, default=5)
-    p.add_argument("--scenes", nargs="*", metavar="SCENE",
-                   help="with --cpu: instead, these convergence scenes (cornell-box, "
-                        "bunny-studio, textured, sun) at their benchmark sizes, pt-render's "
-                        "CPU backend and Mitsuba llvm_ad_rgb in alternating rounds")
+    p.add_argument("--scenes", nargs="+", metavar="SCENE", choices=list(CONVERGENCE),
+                   help="with --cpu: instead, these convergence scenes (%(choices)s) at "
+                        "their benchmark sizes, pt-render's CPU backend and Mitsuba "
+                        "llvm_ad_rgb in alternating rounds")
     p.add_argument("--rounds", type=int, default=3, help="rounds per scene (--scenes)")
     p.add_argument("--spp", type=int, default=16, help="samples per pixel per pass (--scenes)")
     p.add_argument("--json", help="write the record here")
     a = p.parse_args()
+    if a.scenes and not a.cpu:
+        p.error("--scenes measures the CPU backend: give --cpu")
     rec = {"command": command(), "machine": machine(), "date": now(), "versions": versions(),
            "results": []}
     if a.cpu and a.scenes:

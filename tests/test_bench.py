@@ -398,3 +398,16 @@ def test_bootstrap_median_interval():
     v = np.random.default_rng(3).normal(1.0, 0.05, 200)
     lo, hi = bootstrap_median_interval(v)
     assert lo < np.median(v) < hi and hi - lo < 0.05
+
+
+def test_bench_scripts_refuse_bad_arguments_in_one_line():
+    """A malformed size for bench.ab, and bench.throughput --scenes without --cpu or with an
+    unknown scene: argparse's one-line error (exit 2), no traceback."""
+    for args in (["bench.ab", "throughput", "--trees", ".", ".", "--resolution", "64"],
+                 ["bench.ab", "images", "--trees", ".", ".", "--resolution", "0x5"],
+                 ["bench.throughput", "--gpu", "--scenes", "sun"],
+                 ["bench.throughput", "--cpu", "--scenes", "nope"]):
+        r = subprocess.run([sys.executable, "-m", *args], cwd=ROOT, capture_output=True,
+                           text=True, timeout=120)
+        assert r.returncode == 2, (args, r.stderr)
+        assert "Traceback" not in r.stderr and "error:" in r.stderr, (args, r.stderr)
