@@ -13,6 +13,7 @@ Writes a JSON record and prints a markdown table.
     python -m bench.throughput --cpu [--mitsuba] [--big-mesh PATH] [--json OUT]
     python -m bench.throughput --gpu [--mitsuba] [--json OUT]
     python -m bench.throughput --cpu --scenes cornell-box bunny-studio sun [--rounds 3]
+        [--samplers sobol independent]
 """
 import argparse
 import json
@@ -95,12 +96,16 @@ def mitsuba(variant, resolution, spp, repeats):
             "paths_per_s": resolution[0] * resolution[1] * spp / t, "first_render_s": first}
 
 
-def convergence_scenes(names, spp, repeats, rounds):
+def convergence_scenes(names, spp, repeats, rounds, samplers=("sobol",)):
     """pt-render's CPU backend and Mitsuba llvm_ad_rgb on the convergence scenes ``names``
     at their benchmark sizes (bench.scenes.CONVERGENCE; Mitsuba's scenes as the
-    convergence section renders them), in ``rounds`` rounds that alternate the two
-    renderers' order: this machine's speed drifts by 10-30 % over minutes, so only figures
-    taken side by side compare. Each round records each renderer's median pass."""
+    convergence section renders them, with its independent sampler), in ``rounds`` rounds
+    that alternate the two renderers' order: this machine's speed drifts by 10-30 % over
+    minutes, so only figures taken side by side compare. Each round records each
+    renderer's median pass. ``samplers``: ours with each of these samplers in every round
+    (the first is the record's main figure): a sampler's numbers change the speed too, as
+    stratified paths of one pixel share less cache and branch history than independent
+    ones (docs/benchmarks.md)."""
     from bench.run import _mitsuba_scene
     from bench.scenes import convergence_desc
     out = []
@@ -108,38 +113,54 @@ def convergence_scenes(names, spp, repeats, rounds):
     if not ok:
         print(f"throughput: Mitsuba llvm_ad_rgb cannot render here ({why})", file=sys.stderr)
     for name in names:
-        desc = convergence_desc(name)
         got = None
         if ok:
             import mitsuba as mi
             mi.set_variant("llvm_ad_rgb")
             got = _mitsuba_scene(name, "independent")
+        prepared = {}                       # (the BVH and the kernel once, not each round)
+        for sampler in samplers:
+            desc = convergence_desc(name)
+            desc.render.sampler = sampler
+            prepared[sampler] = prepare("cpu", desc)
         res = list(desc.camera.resolution)
         paths = res[0] * res[1] * spp
-        prepared = prepare("cpu", desc)     # (the BVH and the kernel once, not each round)
-        rows = {"ours": [], "mitsuba": []}
+        rows = {"mitsuba": [], **{sampler: [] for sampler in samplers}}
         for k in range(rounds):
-            order = ("ours", "mitsuba") if k % 2 == 0 else ("mitsuba", "ours")
+            order = (*samplers, "mitsuba") if k % 2 == 0 else ("mitsuba", *samplers[::-1])
             for who in order:
-                if who == "ours":
-                    rows["ours"].append(ours("cpu", None, spp, repeats,
-                                             prepared=prepared)["paths_per_s"])
+                if who != "mitsuba":
+                    rows[who].append(ours("cpu", None, spp, repeats,
+                                          prepared=prepared[who])["paths_per_s"])
                 elif got is not None:
                     _, t, _ = mitsuba_pass_times(got[0], spp, repeats)
                     rows["mitsuba"].append(paths / t)
         rec = {"scene": name, "resolution": res, "spp_per_pass": spp, "repeats": repeats,
-               "rounds": rounds, "pt_render_paths_per_s": rows["ours"],
+               "rounds": rounds, "sampler": samplers[0],
+               "pt_render_paths_per_s": rows[samplers[0]],
                "mitsuba_paths_per_s": rows["mitsuba"]}
+        if len(samplers) > 1:
+            rec["pt_render_paths_per_s_by_sampler"] = {x: rows[x] for x in samplers}
         if rows["mitsuba"]:
-            rec["ratio_of_medians"] = float(np.median(rows["ours"]) /
+            rec["ratio_of_medians"] = float(np.median(rows[samplers[0]]) /
                                             np.median(rows["mitsuba"]))
-            rec["ratio_per_round"] = [a / b for a, b in zip(rows["ours"], rows["mitsuba"])]
+            rec["ratio_per_round"] = [a / b for a, b in zip(rows[samplers[0]],
+                                                            rows["mitsuba"])]
+            if len(samplers) > 1:
+                rec["ratio_of_medians_by_sampler"] = {
+                    x: float(np.median(rows[x]) / np.median(rows["mitsuba"]))
+                    for x in samplers}
         out.append(rec)
-        print(f"{name}: pt-render {np.median(rows['ours']) / 1e6:.3f} M paths/s"
-              + (f", Mitsuba {np.median(rows['mitsuba']) / 1e6:.3f}: "
-                 f"{rec['ratio_of_medians']:.3f}x (rounds "
-                 + ", ".join(f"{x:.3f}" for x in rec["ratio_per_round"]) + ")"
-                 if rows["mitsuba"] else ""), flush=True)
+        line = ", ".join(f"pt-render {x} {np.median(rows[x]) / 1e6:.3f}" for x in samplers)
+        if rows["mitsuba"]:
+            line += (f", Mitsuba {np.median(rows['mitsuba']) / 1e6:.3f} M paths/s: "
+                     + ", ".join(f"{x} {np.median(rows[x]) / np.median(rows['mitsuba']):.3f}x"
+                                 for x in samplers)
+                     + f" ({samplers[0]} per round "
+                     + ", ".join(f"{v:.3f}" for v in rec["ratio_per_round"]) + ")")
+        else:
+            line += " M paths/s"
+        print(f"{name}: {line}", flush=True)
     return out
 
 
@@ -216,6 +237,9 @@ def main():
                         "llvm_ad_rgb in alternating rounds")
     p.add_argument("--rounds", type=int, default=3, help="rounds per scene (--scenes)")
     p.add_argument("--spp", type=int, default=16, help="samples per pixel per pass (--scenes)")
+    p.add_argument("--samplers", nargs="+", choices=("sobol", "independent"),
+                   default=["sobol"], help="(--scenes) ours with each of these samplers, "
+                   "the first the main figure (Mitsuba runs its independent sampler)")
     p.add_argument("--json", help="write the record here")
     a = p.parse_args()
     if a.scenes and not a.cpu:
@@ -223,7 +247,8 @@ def main():
     rec = {"command": command(), "machine": machine(), "date": now(), "versions": versions(),
            "results": []}
     if a.cpu and a.scenes:
-        rec["scenes"] = convergence_scenes(a.scenes, a.spp, a.repeats, a.rounds)
+        rec["scenes"] = convergence_scenes(a.scenes, a.spp, a.repeats, a.rounds,
+                                           tuple(dict.fromkeys(a.samplers)))
     elif a.cpu:
         rec["results"].append(ours("cpu", (256, 256), 16, a.repeats))
         if a.mitsuba:

@@ -340,7 +340,7 @@ def test_throughput_on_the_convergence_scenes_alternates_rounds(monkeypatch):
     """`python -m bench.throughput --cpu --scenes ...`: a figure per round for pt-render,
     at the scene's benchmark size; without a usable Mitsuba the peer's rounds are left
     out, and so is the ratio (never a ratio to nothing). The scene is built and its kernel
-    loaded once for all rounds."""
+    loaded once for all rounds, once per sampler asked for (the first the main figure)."""
     import bench.throughput as tp
     monkeypatch.setattr(tp, "usable_mitsuba", lambda variant: (False, "not here"))
     calls = []
@@ -350,14 +350,20 @@ def test_throughput_on_the_convergence_scenes_alternates_rounds(monkeypatch):
         calls.append(kw["prepared"])
         return real_ours(*args, **kw)
     monkeypatch.setattr(tp, "ours", ours)
-    (rec,) = tp.convergence_scenes(["cornell-box"], spp=1, repeats=1, rounds=2)
+    (rec,) = tp.convergence_scenes(["cornell-box"], spp=1, repeats=1, rounds=2,
+                                   samplers=("sobol", "independent"))
     assert rec["scene"] == "cornell-box" and rec["rounds"] == 2
-    assert len(calls) == 2 and calls[0] is calls[1]
+    # round 0: sobol, independent (then Mitsuba); round 1 the other way round
+    assert len(calls) == 4 and calls[0] is calls[3] and calls[1] is calls[2]
+    assert calls[0][0].features.sobol and not calls[1][0].features.sobol
     scene = calls[0][0]
     assert (scene.width, scene.height) == (256, 256) and rec["resolution"] == [256, 256]
-    assert len(rec["pt_render_paths_per_s"]) == 2
-    assert all(x > 0 for x in rec["pt_render_paths_per_s"])
+    assert rec["sampler"] == "sobol" and len(rec["pt_render_paths_per_s"]) == 2
+    by = rec["pt_render_paths_per_s_by_sampler"]
+    assert by["sobol"] == rec["pt_render_paths_per_s"] and len(by["independent"]) == 2
+    assert all(x > 0 for x in by["sobol"] + by["independent"])
     assert rec["mitsuba_paths_per_s"] == [] and "ratio_of_medians" not in rec
+    assert "ratio_of_medians_by_sampler" not in rec
 
 
 def test_ab_paired_alternates_live_workers(tmp_path):
