@@ -103,9 +103,9 @@ def convergence_scenes(names, spp, repeats, rounds, samplers=("sobol",)):
     that alternate the two renderers' order: this machine's speed drifts by 10-30 % over
     minutes, so only figures taken side by side compare. Each round records each
     renderer's median pass. ``samplers``: ours with each of these samplers in every round
-    (the first is the record's main figure): a sampler's numbers change the speed too, as
-    stratified paths of one pixel share less cache and branch history than independent
-    ones (docs/benchmarks.md)."""
+    (the first is the record's main figure): the Sobol sampler's hashing costs the CPU
+    9-20 % of its paths/s (docs/benchmarks.md), and Mitsuba's figures are of its
+    independent sampler."""
     from bench.run import _mitsuba_scene
     from bench.scenes import convergence_desc
     out = []
@@ -244,6 +244,8 @@ def main():
     a = p.parse_args()
     if a.scenes and not a.cpu:
         p.error("--scenes measures the CPU backend: give --cpu")
+    if a.samplers != ["sobol"] and not a.scenes:
+        p.error("--samplers applies to --scenes")
     rec = {"command": command(), "machine": machine(), "date": now(), "versions": versions(),
            "results": []}
     if a.cpu and a.scenes:

@@ -408,11 +408,14 @@ def test_bootstrap_median_interval():
 
 def test_bench_scripts_refuse_bad_arguments_in_one_line():
     """A malformed size for bench.ab, and bench.throughput --scenes without --cpu or with an
-    unknown scene: argparse's one-line error (exit 2), no traceback."""
+    unknown scene, --samplers without --scenes or with an unknown sampler: argparse's
+    one-line error (exit 2), no traceback."""
     for args in (["bench.ab", "throughput", "--trees", ".", ".", "--resolution", "64"],
                  ["bench.ab", "images", "--trees", ".", ".", "--resolution", "0x5"],
                  ["bench.throughput", "--gpu", "--scenes", "sun"],
-                 ["bench.throughput", "--cpu", "--scenes", "nope"]):
+                 ["bench.throughput", "--cpu", "--scenes", "nope"],
+                 ["bench.throughput", "--cpu", "--samplers", "independent"],
+                 ["bench.throughput", "--cpu", "--scenes", "sun", "--samplers", "halton"]):
         r = subprocess.run([sys.executable, "-m", *args], cwd=ROOT, capture_output=True,
                            text=True, timeout=120)
         assert r.returncode == 2, (args, r.stderr)
