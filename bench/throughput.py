@@ -103,9 +103,9 @@ def convergence_scenes(names, spp, repeats, rounds, samplers=("sobol",)):
     that alternate the two renderers' order: this machine's speed drifts by 10-30 % over
     minutes, so only figures taken side by side compare. Each round records each
     renderer's median pass. ``samplers``: ours with each of these samplers in every round
-    (the first is the record's main figure): the Sobol sampler's hashing costs the CPU
-    9-20 % of its paths/s (docs/benchmarks.md), and Mitsuba's figures are of its
-    independent sampler."""
+    (the first is the record's main figure): the Sobol sampler's hashing cost the CPU
+    9-20 % of its paths/s on 2026-11-28 (docs/benchmarks.md), and Mitsuba's figures are of
+    its independent sampler."""
     from bench.run import _mitsuba_scene
     from bench.scenes import convergence_desc
     out = []

@@ -78,8 +78,9 @@ def test_sobol_digit_table_gives_the_same_digits(rng):
 
 
 def test_the_cpu_sampler_draws_the_gpu_samplers_numbers():
-    """make_sampler with the digit table (the CPU kernels') and without (the GPU's): the same
-    numbers for every dimension of a path."""
+    """make_sampler with the digit table and the set's four numbers scrambled at once (the
+    CPU kernels') and without (the GPU's): the same numbers for every dimension of a path,
+    compiled and interpreted."""
     dims = np.arange(4 * 12)
     outs = []
     for table in (False, True):
@@ -93,8 +94,13 @@ def test_the_cpu_sampler_draws_the_gpu_samplers_numbers():
                 out[d] = draw(state, open_set(state, d), d)
             return out
         outs.append(np.array([numbers(p, s, 3) for p in (0, 7, 4093) for s in
-                              (0, 1, 5, 255, 1000, 70000, 2**31 + 5)]))
+                              (0, 1, 5, 255, 256, 1000, 70000, 2**31 + 5)]))
+        if table:
+            # the interpreted form of the four-at-once scramble (sobol_floats_table)
+            outs.append(np.array([numbers.py_func(p, s, 3) for p in (0, 4093)
+                                  for s in (0, 256, 2**31 + 5)]))
     np.testing.assert_array_equal(outs[0], outs[1])
+    np.testing.assert_array_equal(outs[2], outs[0][[0, 4, 7, 16, 20, 23]])
 
 
 def test_owen_scramble_is_a_nested_permutation(rng):
