@@ -83,15 +83,20 @@ def _ir32(body):
     return wrap
 
 
-def _c(v):
+def _c(v, like=None):
+    """The 32-bit constant v; where ``like`` (an IR value) is a vector of i32, v in every
+    lane, so that the hashes' IR below serves scalars and vectors alike."""
+    if like is not None and isinstance(like.type, ir.VectorType):
+        return ir.Constant(like.type, [ir.Constant(_I32, int(v) & 0xFFFFFFFF)]
+                           * like.type.count)
     return ir.Constant(_I32, int(v))
 
 
 def _pcg_ir(b, x):
-    state = b.add(b.mul(x, _c(_MUL)), _c(_INC))
-    shift = b.add(b.lshr(state, _c(28)), _c(4))
-    word = b.mul(b.xor(b.lshr(state, shift), state), _c(_MUL2))
-    return b.xor(b.lshr(word, _c(22)), word)
+    state = b.add(b.mul(x, _c(_MUL, x)), _c(_INC, x))
+    shift = b.add(b.lshr(state, _c(28, x)), _c(4, x))
+    word = b.mul(b.xor(b.lshr(state, shift), state), _c(_MUL2, x))
+    return b.xor(b.lshr(word, _c(22, x)), word)
 
 
 @_ir32(_pcg_ir)
@@ -181,6 +186,12 @@ _DIM_MUL = np.uint64(0xC2B2AE35)
 
 
 def _brev_ir(b, x):
+    if isinstance(x.type, ir.VectorType):
+        # (llvmlite's declare_intrinsic names no vector types)
+        fn = cgutils.get_or_insert_function(
+            b.module, ir.FunctionType(x.type, [x.type]),
+            f"llvm.bitreverse.v{x.type.count}i32")
+        return b.call(fn, [x])
     return b.call(b.module.declare_intrinsic("llvm.bitreverse", [_I32]), [x])
 
 
@@ -195,11 +206,11 @@ def reverse_bits(x):
 
 
 def _lk_ir(b, x, seed):
-    x = b.xor(x, b.mul(x, _c(_LK0)))
+    x = b.xor(x, b.mul(x, _c(_LK0, x)))
     x = b.add(x, seed)
-    x = b.mul(x, b.or_(b.lshr(seed, _c(16)), _c(1)))
-    x = b.xor(x, b.mul(x, _c(_LK1)))
-    return b.xor(x, b.mul(x, _c(_LK2)))
+    x = b.mul(x, b.or_(b.lshr(seed, _c(16, x)), _c(1, x)))
+    x = b.xor(x, b.mul(x, _c(_LK1, x)))
+    return b.xor(x, b.mul(x, _c(_LK2, x)))
 
 
 @_ir32(_lk_ir)
@@ -402,14 +413,6 @@ def _scramble4_py(x0, x1, x2, x3, seed):
 _V4 = ir.VectorType(_I32, 4)
 
 
-def _v4(values):
-    return ir.Constant(_V4, [ir.Constant(_I32, int(v) & 0xFFFFFFFF) for v in values])
-
-
-def _splat(v):
-    return _v4([v] * 4)
-
-
 @intrinsic
 def _scramble4_ir(typingctx, x0, x1, x2, x3, seed):
     """_scramble4_py with the four coordinates in one <4 x i32> (the CPU's SIMD form of
@@ -426,25 +429,14 @@ def _scramble4_ir(typingctx, x0, x1, x2, x3, seed):
         x = ir.Constant(_V4, ir.Undefined)
         for k in range(4):
             x = b.insert_element(x, v32[k], ir.Constant(_I32, k))
-        s = b.insert_element(ir.Constant(_V4, ir.Undefined), v32[4], ir.Constant(_I32, 0))
-        s = b.shuffle_vector(s, ir.Constant(_V4, ir.Undefined), _v4([0, 0, 0, 0]))
-        # per coordinate: seed_c = pcg_hash(seed + (c + 1) * _DIM_MUL)
-        s = b.add(s, _v4([(c + 1) * int(_DIM_MUL) for c in range(4)]))
-        state = b.add(b.mul(s, _splat(_MUL)), _splat(_INC))
-        shift = b.add(b.lshr(state, _splat(28)), _splat(4))
-        word = b.mul(b.xor(b.lshr(state, shift), state), _splat(_MUL2))
-        s = b.xor(b.lshr(word, _splat(22)), word)
-        # lk_permutation(x, seed_c)
-        x = b.xor(x, b.mul(x, _splat(_LK0)))
-        x = b.add(x, s)
-        x = b.mul(x, b.or_(b.lshr(s, _splat(16)), _splat(1)))
-        x = b.xor(x, b.mul(x, _splat(_LK1)))
-        x = b.xor(x, b.mul(x, _splat(_LK2)))
-        # (llvmlite's declare_intrinsic names no vector types)
-        brev = cgutils.get_or_insert_function(b.module, ir.FunctionType(_V4, [_V4]),
-                                              "llvm.bitreverse.v4i32")
-        x = b.call(brev, [x])
-        f = b.uitofp(b.lshr(x, _splat(8)), ir.VectorType(ir.FloatType(), 4))
+        # per coordinate c the seed pcg_hash(seed + (c + 1) * _DIM_MUL), as sobol_component
+        seeds = b.insert_element(ir.Constant(_V4, ir.Undefined), v32[4], _c(0))
+        seeds = b.shuffle_vector(seeds, ir.Constant(_V4, ir.Undefined), _c(0, x))
+        seeds = b.add(seeds, ir.Constant(_V4, [_c(((k + 1) * int(_DIM_MUL)) & 0xFFFFFFFF)
+                                               for k in range(4)]))
+        # the scalar forms' own IR (_pcg_ir, _lk_ir, _brev_ir) on the four lanes
+        x = _brev_ir(b, _lk_ir(b, x, _pcg_ir(b, seeds)))
+        f = b.uitofp(b.lshr(x, _c(8, x)), ir.VectorType(ir.FloatType(), 4))
         f = b.fmul(f, ir.Constant(ir.VectorType(ir.FloatType(), 4),
                                   [ir.Constant(ir.FloatType(), float(_TO_UNIT))] * 4))
         out = [b.extract_element(f, ir.Constant(_I32, k)) for k in range(4)]
