@@ -316,11 +316,20 @@ def _size(text):
     return w, h
 
 
+def _tree(text):
+    """A source tree to measure: a folder (a commit is checked out into one first)."""
+    if not os.path.isdir(text):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a folder: give a source tree, e.g. a revision's from "
+            f"`mkdir DIR && git archive REV pathtracer scenes cli.py | tar -x -C DIR`")
+    return text
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(prog="python -m bench.ab", description=__doc__.split("\n")[0])
     sub = p.add_subparsers(dest="cmd", required=True)
     t = sub.add_parser("throughput")
-    t.add_argument("--trees", nargs=2, required=True)
+    t.add_argument("--trees", nargs=2, required=True, type=_tree)
     t.add_argument("--backend", choices=("cpu", "cuda"), default="cpu")
     t.add_argument("--scenes", nargs="*")
     t.add_argument("--repeats", type=int, default=5)
@@ -336,7 +345,7 @@ def main(argv=None):
     t.add_argument("--options", help='backend options of the trees that take them, as JSON '
                    '(e.g. \'{"target_threads": 1}\')')
     i = sub.add_parser("images")
-    i.add_argument("--trees", nargs=2, required=True)
+    i.add_argument("--trees", nargs=2, required=True, type=_tree)
     i.add_argument("--scenes", nargs="*")
     i.add_argument("--spp", type=int, default=4)
     i.add_argument("--resolution", type=_size, default="96x72")

@@ -407,10 +407,12 @@ def test_bootstrap_median_interval():
 
 
 def test_bench_scripts_refuse_bad_arguments_in_one_line():
-    """A malformed size for bench.ab, and bench.throughput --scenes without --cpu or with an
-    unknown scene, --samplers without --scenes or with an unknown sampler: argparse's
-    one-line error (exit 2), no traceback."""
+    """A malformed size or a tree that is not a folder (a revision's name) for bench.ab, and
+    bench.throughput --scenes without --cpu or with an unknown scene, --samplers without
+    --scenes or with an unknown sampler: argparse's one-line error (exit 2), no
+    traceback."""
     for args in (["bench.ab", "throughput", "--trees", ".", ".", "--resolution", "64"],
+                 ["bench.ab", "throughput", "--trees", "HEAD", ".", "--scenes", "sun"],
                  ["bench.ab", "images", "--trees", ".", ".", "--resolution", "0x5"],
                  ["bench.throughput", "--gpu", "--scenes", "sun"],
                  ["bench.throughput", "--cpu", "--scenes", "nope"],
