@@ -353,6 +353,47 @@ def test_path_regeneration_changes_no_bit(name):
     np.testing.assert_array_equal(sa, sb)
 
 
+def test_escapes_looked_up_later_change_no_bit():
+    """The CPU's form for scenes with an environment map (integrator.render_pixel_deferred)
+    queues each finished path in a ring of ESCAPE_RING records per row and finishes a path
+    whose ray left the scene (the map's lookup, MIS, the pixel's sum) when the ring comes
+    round, or at the row's end (drain_escapes): the sums and counts equal
+    render_pixel_nested's bit for bit. Interpreted, on a row of more paths than the ring
+    holds, with paths that leave and paths that end on a surface (at most two bounces; the
+    principled grid: an HDRI)."""
+    from pathtracer.kernels.constants import STACK_SIZE
+    from pathtracer.kernels.integrator import make_deferred_pixel, make_render_pixel
+    scene = load_scene(os.path.join(ROOT, "scenes", "principled-grid.json"))
+    w, h = scene.width, scene.height
+    py = 3 * h // 4             # (the spheres' feet: paths that leave and paths that end)
+    columns = range(w // 2 - 3, w // 2 + 3)
+    n_samples = 3
+    assert len(columns) * n_samples > L.ESCAPE_RING
+    nested = make_render_pixel(scene.features, "python", False)
+    deferred = make_deferred_pixel(scene.features, "python")
+    stack = np.empty(STACK_SIZE, np.int32)
+    a, sa = np.zeros((h, w, 3), np.float32), np.zeros((h, w, 3), np.int32)
+    b, sb = np.full((h, w, 3), np.nan, np.float32), np.full((h, w, 3), -1, np.int32)
+    esc_f = np.full((L.ESCAPE_RING, L.ESC_F_WIDTH), np.nan, np.float32)
+    esc_i = np.full((L.ESCAPE_RING, L.ESC_I_WIDTH), -1, np.int32)
+    left = []
+    queued = 0
+    with np.errstate(all="ignore"):
+        for px in columns:
+            nested(px, py, 3, n_samples, 1, 2, 3, scene.arrays, stack, a, sa)
+            queued = deferred.pixel(px, py, 3, n_samples, 1, 2, 3, scene.arrays, stack, esc_f,
+                                    esc_i, queued, b, sb)
+            # (whether each of the pixel's paths left the scene, from its record)
+            left += [esc_i[q % L.ESCAPE_RING, L.ESC_OUT] for q in range(queued - n_samples,
+                                                                       queued)]
+        deferred.drain(esc_f, esc_i, queued, py, scene.arrays, b, sb)
+    assert queued == len(columns) * n_samples
+    assert 0 < sum(left) < len(left) and set(left) == {0, 1}
+    np.testing.assert_array_equal(a[py, columns], b[py, columns])
+    np.testing.assert_array_equal(sa[py, columns], sb[py, columns])
+    assert a[py, columns].all() and (sa[py, columns, L.STAT_BOUNCE_RAYS] > 0).any()
+
+
 def test_cpu_rows_interleaved_over_threads_give_the_same_image():
     """The CPU kernels deal rows to their threads interleaved (backends.cpu.interleaved_row):
     for any thread count, on an image whose height no count divides, every row is rendered

@@ -9,8 +9,8 @@ from .._cache import compile_lock, jit_cache, read_only
 
 from ..accel.wide import WIDE_STACK_SIZE, widen_bvh
 from ..kernels.device import FAST_MATH_FLAGS
-from ..kernels.layout import AOV_WIDTH
-from ..kernels.integrator import make_aov_pixel, make_render_pixel
+from ..kernels.layout import AOV_WIDTH, ESC_F_WIDTH, ESC_I_WIDTH, ESCAPE_RING, specialise
+from ..kernels.integrator import make_aov_pixel, make_deferred_pixel, make_render_pixel
 
 
 def cpu_arrays(arrays, previous=None):
@@ -46,6 +46,8 @@ def feature_bits(features):
 
 @functools.lru_cache(maxsize=None)
 def pass_kernel(features):
+    if specialise(features).env_map:
+        return _deferred_pass_kernel(features)
     render_pixel = make_render_pixel(features)
 
     # error_model='numpy': float division by zero gives inf/nan as on the GPU, not an exception.
@@ -70,6 +72,40 @@ def pass_kernel(features):
                     for c in range(out.shape[2]):
                         out[py, px, c] = 0.0
                         stats[py, px, c] = 0
+
+    return render_pass
+
+
+def _deferred_pass_kernel(features):
+    """render_pass for scenes with an environment map: each row's paths go through a ring
+    whose records finish a few paths later (integrator.render_pixel_deferred)."""
+    deferred = make_deferred_pixel(features)
+    render_pixel, drain = deferred.pixel, deferred.drain
+
+    @njit(parallel=True, nogil=True, cache=jit_cache(), error_model="numpy",
+          fastmath=set(FAST_MATH_FLAGS))
+    def render_pass(out, stats, sample_start, n_samples, seed, max_bounces, rr_depth, scene,
+                    active, threads):
+        height = out.shape[0]
+        rows_per = (height + threads - 1) // threads
+        for k in prange(rows_per * threads):
+            py = interleaved_row(k, rows_per, threads)
+            if py >= height:
+                continue
+            stack = np.empty(WIDE_STACK_SIZE, np.int32)   # traversal scratch, per row
+            esc_f = np.empty((ESCAPE_RING, ESC_F_WIDTH), np.float32)
+            esc_i = np.empty((ESCAPE_RING, ESC_I_WIDTH), np.int32)
+            queued = 0
+            for px in range(out.shape[1]):
+                if active[py, px]:
+                    queued = render_pixel(px, py, sample_start, n_samples, seed, max_bounces,
+                                          rr_depth, scene, stack, esc_f, esc_i, queued, out,
+                                          stats)
+                else:                                # adaptive sampling: a finished pixel
+                    for c in range(out.shape[2]):
+                        out[py, px, c] = 0.0
+                        stats[py, px, c] = 0
+            drain(esc_f, esc_i, queued, py, scene, out, stats)
 
     return render_pass
 

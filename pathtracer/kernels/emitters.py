@@ -28,7 +28,7 @@ from typing import NamedTuple
 
 from .constants import INF, ONE, ONE_MINUS_EPS, SHADOW_SHORTEN, ZERO
 from .device import device, step_marker
-from .envmap import env_lookup, env_sample_lit
+from .envmap import env_locate, env_lookup_cell, env_sample_lit
 from .layout import (ENV_P_SELECT, PL_AXIS, PL_CONE_OFFSET, PL_CONE_SCALE, PL_INTENSITY,
                      PL_POSITION, point_light_index, specialise)
 from .lights import (direction_to, light_tree_pmf, sample_discrete, sample_light_tree,
@@ -56,6 +56,7 @@ class EmitterSteps(NamedTuple):
     sample_emitter: object
     hit_emission: object
     escaped: object
+    escaped_in_cell: object
 
 
 @functools.lru_cache(maxsize=None)
@@ -180,10 +181,17 @@ def make_emitters(features, target="cpu"):
         d. A constant environment is not sampled by next-event estimation: weight 1."""
         if ENV_MAP:
             # (the radiance and, for MIS, the density from one mapping of d to the map)
-            le, pdf_dir = env_lookup(env_img, env_info, d, pdf_prev > ZERO)
-            return le, mis_weight_hit(pdf_prev, env_info[ENV_P_SELECT] * pdf_dir)
+            i0, i1, j0, j1, fx, fy, y = env_locate(env_img, env_info, d)
+            return escaped_in_cell(env_img, env_info, i0, i1, j0, j1, fx, fy, y, pdf_prev)
         if ENVIRONMENT:
             return (env[0], env[1], env[2]), ONE
         return NO_RADIANCE, ZERO
 
-    return EmitterSteps(sample_emitter, hit_emission, escaped)
+    @step
+    def escaped_in_cell(env_img, env_info, i0, i1, j0, j1, fx, fy, y, pdf_prev):
+        """escaped for an environment map, given the cell its direction reads
+        (envmap.env_locate: i0, i1, j0, j1, fx, fy, y)."""
+        le, pdf_dir = env_lookup_cell(env_img, i0, i1, j0, j1, fx, fy, y, pdf_prev > ZERO)
+        return le, mis_weight_hit(pdf_prev, env_info[ENV_P_SELECT] * pdf_dir)
+
+    return EmitterSteps(sample_emitter, hit_emission, escaped, escaped_in_cell)

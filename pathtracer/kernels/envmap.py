@@ -40,7 +40,7 @@ from .device import device
 from .fmath import acos_f32, atan2_f32
 from .layout import ENV_COS_ROT, ENV_DENSITY, ENV_SIN_ROT, ENV_TEXEL_WIDTH
 from .lights import sample_discrete
-from .loads import load4_texel
+from .loads import load4_texel, prefetch
 from .textures import bilinear_blend, bilinear_cell
 from .warps import sincos
 
@@ -124,10 +124,36 @@ def env_pdf(env_img, env_info, d):
 def env_lookup(env_img, env_info, d, with_pdf):
     """(env_eval, env_pdf if with_pdf else 0) of direction d from one mapping to (u, v)
     and one load of the cell's texels: what a ray that escaped needs."""
+    i0, i1, j0, j1, fx, fy, y = env_locate(env_img, env_info, d)
+    return env_lookup_cell(env_img, i0, i1, j0, j1, fx, fy, y, with_pdf)
+
+
+@device
+def env_locate(env_img, env_info, d):
+    """The cell of the map that direction d reads (env_cell: i0, i1, j0, j1, fx, fy) and
+    d's y (cos theta): env_lookup's first half, which reads no texel (the CPU locates the
+    cells of a batch of escaped rays first and prefetches their texels, then looks them up
+    with env_lookup_cell)."""
     h = env_img.shape[0]
     w = env_img.shape[1]
     u, v, y = env_uv(env_info, d)
     i0, i1, j0, j1, fx, fy = env_cell(w, h, u, v)
+    return i0, i1, j0, j1, fx, fy, y
+
+
+@device
+def env_prefetch(env_img, i0, i1, j0, j1):
+    """Prefetch the four texels of an env_cell (on the CPU; nothing elsewhere)."""
+    prefetch(env_img, j0, i0)
+    prefetch(env_img, j0, i1)
+    prefetch(env_img, j1, i0)
+    prefetch(env_img, j1, i1)
+
+
+@device
+def env_lookup_cell(env_img, i0, i1, j0, j1, fx, fy, y, with_pdf):
+    """env_lookup's second half: the radiance and (if with_pdf) the density at a point of
+    an env_cell, y its direction's cos theta."""
     t00, t10, t01, t11 = cell_texels(env_img, i0, i1, j0, j1)
     pdf = ZERO
     if with_pdf:

@@ -29,9 +29,12 @@ from .camera import pinhole_ray, thin_lens_ray
 from .constants import INF, ONE, RR_MAX, ZERO
 from .device import entry_marker, step_marker
 from .emitters import make_emitters
+from .envmap import env_locate, env_prefetch
 from .layout import (AOV_ALBEDO, AOV_NORMAL, CAM_CONE, D_BSDF_LOBE, D_BSDF_U, D_BSDF_V,
                      D_FIRST_BOUNCE, D_LENS_U, D_LENS_V, D_LIGHT_SELECT, D_LIGHT_U, D_LIGHT_V,
-                     D_PIXEL_X, D_PIXEL_Y, D_RR, DIMS_PER_BOUNCE, HIT_B1, HIT_B2, HIT_T,
+                     D_PIXEL_X, D_PIXEL_Y, D_RR, DIMS_PER_BOUNCE, ESC_BETA, ESC_FX, ESC_FY,
+                     ESC_I0, ESC_I1, ESC_J0, ESC_J1, ESC_OUT, ESC_PDF_PREV, ESC_PX,
+                     ESC_RADIANCE, ESC_Y, ESCAPE_RING, HIT_B1, HIT_B2, HIT_T,
                      P_BASE, P_METALLIC, PATH_BETA, PATH_BOUNCE, PATH_BOUNCE_RAYS,
                      PATH_CONE, PATH_D, PATH_O, PATH_PDF_PREV, PATH_RADIANCE,
                      PATH_SHADOW_RAYS, PATH_SKIP,
@@ -123,8 +126,9 @@ def make_kernels(features, target="cpu"):
     local_wo, eval_world, sample_world, leave, side_normal, own_skip = (
         scatter.local_wo, scatter.eval_world, scatter.sample_world, scatter.leave,
         scatter.side_normal, scatter.own_skip)
-    sample_emitter, hit_emission, escaped = (
-        emitters.sample_emitter, emitters.hit_emission, emitters.escaped)
+    sample_emitter, hit_emission, escaped, escaped_in_cell = (
+        emitters.sample_emitter, emitters.hit_emission, emitters.escaped,
+        emitters.escaped_in_cell)
 
     @step
     def camera_ray(cam, px, py, state, width, height):
@@ -355,7 +359,13 @@ def make_kernels(features, target="cpu"):
         steps written out in one loop. On the GPU, in the scenes that run one path after
         the other (see regenerates), this loop compiles 4-7 % faster than path_vertex
         called in it, although NVVM inlines both completely (H100, 2026-11-23); the two
-        are kept equal by tests/test_render.py (the same image, bit for bit)."""
+        are kept equal by tests/test_render.py (the same image, bit for bit).
+
+        Returns (r, g, b, bounce rays, shadow rays, out_ray, beta, d, pdf_prev): where
+        out_ray, the path's last ray (o, d) left the scene towards an environment, whose
+        radiance (weighted by MIS against pdf_prev, the density of the BSDF sample that made
+        the ray, and by the throughput beta) the caller adds to (r, g, b) with escaped
+        (render_pixel_nested) or later (the CPU's render_pixel_deferred)."""
         state = start_path(py * width + px, sample_index, seed)
         o, d = camera_ray(scene.cam, px, py, state, width, height)
         beta = (ONE, ONE, ONE)      # path throughput: product of f cos / pdf (and 1/q of RR)
@@ -370,13 +380,13 @@ def make_kernels(features, target="cpu"):
             spread = scene.cam[CAM_CONE]
         n_bounce_rays = 0
         n_shadow_rays = 0
+        out_ray = False
         while True:
             t, tri, b1, b2 = trace_closest(o, d, INF, skip, scene.tri_v, scene.bvh_box,
                                            scene.bvh_child, stack)
             if tri < 0:
-                if ANY_ENVIRONMENT:
-                    le, weight = escaped(scene.env, scene.env_img, scene.env_info, d, pdf_prev)
-                    radiance = add(radiance, scale(mul(beta, le), weight))
+                # (the caller adds what the ray sees: see the docstring)
+                out_ray = ANY_ENVIRONMENT
                 break
             # ---- the surface hit ----
             v0 = load3(scene.tri_v, tri, TRI_V0)
@@ -442,7 +452,8 @@ def make_kernels(features, target="cpu"):
             beta, alive = russian_roulette(beta, bounce, rr_depth, state, dim)
             if not alive:
                 break
-        return radiance[0], radiance[1], radiance[2], n_bounce_rays, n_shadow_rays
+        return (radiance[0], radiance[1], radiance[2], n_bounce_rays, n_shadow_rays, out_ray,
+                beta, d, pdf_prev)
 
     @entry_inlined
     def render_pixel_nested(px, py, sample_start, n_samples, seed, max_bounces, rr_depth,
@@ -455,12 +466,103 @@ def make_kernels(features, target="cpu"):
         n_bounce = 0
         n_shadow = 0
         for s in range(sample_start, sample_start + n_samples):
-            sr, sg, sb, nb, ns = render_sample(px, py, s, seed, width, height, max_bounces,
-                                               rr_depth, scene, stack)
-            r, g, b, n_bad = add_sample(r, g, b, n_bad, (sr, sg, sb))
+            sr, sg, sb, nb, ns, out_ray, beta, d, pdf_prev = render_sample(
+                px, py, s, seed, width, height, max_bounces, rr_depth, scene, stack)
+            radiance = (sr, sg, sb)
+            if out_ray:
+                le, weight = escaped(scene.env, scene.env_img, scene.env_info, d, pdf_prev)
+                radiance = add(radiance, scale(mul(beta, le), weight))
+            r, g, b, n_bad = add_sample(r, g, b, n_bad, radiance)
             n_bounce += nb
             n_shadow += ns
         store_pixel(out, stats, px, py, r, g, b, n_bounce, n_shadow, n_bad)
+
+    # ---- The CPU's form for environment maps: escaped rays looked up a few paths later ----
+    # A ray that leaves the scene reads a random cell of the map (8 MB of texels for a 1k
+    # HDRI, beyond a core's L2), and a core running one path at a time waits for those
+    # loads. render_pixel_deferred queues each finished path in a ring of ESCAPE_RING
+    # records per image row (esc_f, esc_i; layout ESC_*): its radiance so far and, for a
+    # ray that left, the map's cell (env_locate) with its texels prefetched; the record is
+    # finished (escaped_in_cell, add_sample into out) when the ring comes round to its
+    # slot, ESCAPE_RING paths later, or by drain_escapes at the row's end. Records are
+    # finished in the order they were queued, so each pixel's samples are added in sample
+    # order, as render_pixel_nested adds them.
+
+    @step
+    def finish_record(esc_f, esc_i, slot, py, scene, out, stats):
+        px = esc_i[slot, ESC_PX]
+        radiance = (esc_f[slot, ESC_RADIANCE], esc_f[slot, ESC_RADIANCE + 1],
+                    esc_f[slot, ESC_RADIANCE + 2])
+        if esc_i[slot, ESC_OUT] != 0:
+            le, weight = escaped_in_cell(
+                scene.env_img, scene.env_info, esc_i[slot, ESC_I0], esc_i[slot, ESC_I1],
+                esc_i[slot, ESC_J0], esc_i[slot, ESC_J1], esc_f[slot, ESC_FX],
+                esc_f[slot, ESC_FY], esc_f[slot, ESC_Y], esc_f[slot, ESC_PDF_PREV])
+            beta = (esc_f[slot, ESC_BETA], esc_f[slot, ESC_BETA + 1], esc_f[slot, ESC_BETA + 2])
+            radiance = add(radiance, scale(mul(beta, le), weight))
+        r, g, b, n_bad = add_sample(out[py, px, 0], out[py, px, 1], out[py, px, 2],
+                                    stats[py, px, STAT_NONFINITE], radiance)
+        out[py, px, 0] = r
+        out[py, px, 1] = g
+        out[py, px, 2] = b
+        stats[py, px, STAT_NONFINITE] = n_bad
+
+    @step
+    def queue_record(esc_f, esc_i, slot, px, radiance, out_ray, beta, d, pdf_prev, scene):
+        esc_i[slot, ESC_PX] = px
+        esc_f[slot, ESC_RADIANCE] = radiance[0]
+        esc_f[slot, ESC_RADIANCE + 1] = radiance[1]
+        esc_f[slot, ESC_RADIANCE + 2] = radiance[2]
+        esc_i[slot, ESC_OUT] = 1 if out_ray else 0
+        if out_ray:
+            i0, i1, j0, j1, fx, fy, y = env_locate(scene.env_img, scene.env_info, d)
+            env_prefetch(scene.env_img, i0, i1, j0, j1)
+            esc_i[slot, ESC_I0] = i0
+            esc_i[slot, ESC_I1] = i1
+            esc_i[slot, ESC_J0] = j0
+            esc_i[slot, ESC_J1] = j1
+            esc_f[slot, ESC_FX] = fx
+            esc_f[slot, ESC_FY] = fy
+            esc_f[slot, ESC_Y] = y
+            esc_f[slot, ESC_PDF_PREV] = pdf_prev
+            esc_f[slot, ESC_BETA] = beta[0]
+            esc_f[slot, ESC_BETA + 1] = beta[1]
+            esc_f[slot, ESC_BETA + 2] = beta[2]
+
+    @entry_inlined
+    def render_pixel_deferred(px, py, sample_start, n_samples, seed, max_bounces, rr_depth,
+                              scene, stack, esc_f, esc_i, queued, out, stats):
+        """render_pixel_nested's sums, each path's escaped ray finished ESCAPE_RING paths
+        later (see above); ``queued``: the row's paths queued so far (the ring's position);
+        returns it. The row's last records are finished by drain_escapes."""
+        height = out.shape[0]
+        width = out.shape[1]
+        for c in range(3):
+            out[py, px, c] = ZERO
+        stats[py, px, STAT_NONFINITE] = 0
+        n_bounce = 0
+        n_shadow = 0
+        for s in range(sample_start, sample_start + n_samples):
+            sr, sg, sb, nb, ns, out_ray, beta, d, pdf_prev = render_sample(
+                px, py, s, seed, width, height, max_bounces, rr_depth, scene, stack)
+            slot = queued % ESCAPE_RING
+            if queued >= ESCAPE_RING:
+                finish_record(esc_f, esc_i, slot, py, scene, out, stats)
+            queue_record(esc_f, esc_i, slot, px, (sr, sg, sb), out_ray, beta, d, pdf_prev,
+                         scene)
+            queued += 1
+            n_bounce += nb
+            n_shadow += ns
+        stats[py, px, STAT_BOUNCE_RAYS] = n_bounce
+        stats[py, px, STAT_SHADOW_RAYS] = n_shadow
+        return queued
+
+    @entry_inlined
+    def drain_escapes(esc_f, esc_i, queued, py, scene, out, stats):
+        """Finish the records still in the ring after the row's ``queued`` paths, oldest
+        first."""
+        for q in range(max(queued - ESCAPE_RING, 0), queued):
+            finish_record(esc_f, esc_i, q % ESCAPE_RING, py, scene, out, stats)
 
     @entry
     def aov_pixel(px, py, n_samples, seed, scene, stack, out):
@@ -714,7 +816,21 @@ def make_kernels(features, target="cpu"):
 
     wavefront = Wavefront(wave_start, wave_trace, store_hit, wave_miss, wave_shade,
                           wave_finish, wave_film)
-    return render_pixel, aov_pixel, render_pixel_nested, wavefront
+    return (render_pixel, aov_pixel, render_pixel_nested, wavefront,
+            Deferred(render_pixel_deferred, drain_escapes))
+
+
+class Deferred(NamedTuple):
+    """The CPU's pixel function for scenes with an environment map, whose escaped rays are
+    looked up a few paths later (see make_kernels), and the row's last step."""
+    pixel: object
+    drain: object
+
+
+@functools.lru_cache(maxsize=None)
+def make_deferred_pixel(features, target="cpu"):
+    """:class:`Deferred` for scenes with ``features`` (an environment map)."""
+    return make_kernels(features, target)[4]
 
 
 class Wavefront(NamedTuple):

@@ -257,6 +257,25 @@ STAT_SHADOW_RAYS = 1
 STAT_NONFINITE = 2
 STATS_WIDTH = 3
 
+# ---- The CPU's ring of finished paths whose escaped ray is looked up later ----------------------
+# (integrator.render_pixel_deferred): per image row float32 (ESCAPE_RING, ESC_F_WIDTH) and
+# int32 (ESCAPE_RING, ESC_I_WIDTH)
+ESCAPE_RING = 8       # paths between a cell's prefetch and its lookup
+ESC_RADIANCE = 0      # the path's radiance before its escaped ray (3)
+ESC_BETA = 3          # the throughput of the ray that left (3)
+ESC_PDF_PREV = 6      # the density of the BSDF sample that made it (0: the camera's ray)
+ESC_FX = 7            # the map cell's fractions and the direction's cos theta (env_locate)
+ESC_FY = 8
+ESC_Y = 9
+ESC_F_WIDTH = 10
+ESC_PX = 0            # the pixel's column
+ESC_OUT = 1           # 1: the path's last ray left the scene
+ESC_I0 = 2            # the cell's texel columns and rows (env_locate)
+ESC_I1 = 3
+ESC_J0 = 4
+ESC_J1 = 5
+ESC_I_WIDTH = 6
+
 # ---- Paths under way in the wavefront kernels: float32 (PATH_F_WIDTH, N), int32 --------------
 # (PATH_I_WIDTH, N), a row per field so that a warp's lanes (consecutive paths) read
 # consecutive words; the closest hits of a queue: float32 (HIT_F_WIDTH, N), int32 (N,)

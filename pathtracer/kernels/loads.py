@@ -29,6 +29,14 @@ def load4_texel(a, i, j):
     return a[i, j, 0], a[i, j, 1], a[i, j, 2], a[i, j, 3]
 
 
+def prefetch(a, i, j):
+    """A hint that a[i, j] (a 2-D C-contiguous array; a[i, j, 0] of a 3-D one) will be read
+    soon: on the CPU one prefetch instruction for its cache line (LLVM's ``llvm.prefetch``),
+    nothing on the GPU and interpreted. The address is not checked: a prefetch never
+    faults."""
+    return None
+
+
 def vector_alignment(context):
     """The alignment to mark a 16-byte vector load with: 16 on the GPU (which needs it for
     one ``ld.v4``; see the alignment rules above), 4 on the CPU (x86 loads any)."""
@@ -59,8 +67,36 @@ def _load4_codegen(context, builder, signature, args):
     return context.make_tuple(builder, signature.return_type, vals)
 
 
+@intrinsic
+def _prefetch_ir(typingctx, a, i, j):
+    if not (isinstance(a, types.Array) and a.ndim in (2, 3) and a.layout == "C"
+            and isinstance(i, types.Integer) and isinstance(j, types.Integer)):
+        return None
+
+    def codegen(context, builder, signature, args):
+        if "cuda" in type(context).__module__:
+            return context.get_dummy_value()
+        aryty, ity, jty = signature.args
+        ary = context.make_array(aryty)(context, builder, args[0])
+        inds = [context.cast(builder, args[1], ity, types.intp),
+                context.cast(builder, args[2], jty, types.intp)]
+        inds += [context.get_constant(types.intp, 0)] * (aryty.ndim - 2)
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, inds, wraparound=False)
+        i8p = ir.IntType(8).as_pointer()
+        ptr = builder.bitcast(ptr, i8p)
+        i32 = ir.IntType(32)
+        fn = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32]),
+            "llvm.prefetch.p0")
+        # (read, keep in all cache levels, data cache)
+        builder.call(fn, [ptr, ir.Constant(i32, 0), ir.Constant(i32, 3), ir.Constant(i32, 1)])
+        return context.get_dummy_value()
+    return types.none(a, i, j), codegen
+
+
 _load4_ir = intrinsic(_load4_typer(2))
 _load4_texel_ir = intrinsic(_load4_typer(3))
 overload(load4, strict=False)(lambda a, i, j: (lambda a, i, j: _load4_ir(a, i, j)))
+overload(prefetch, strict=False)(lambda a, i, j: (lambda a, i, j: _prefetch_ir(a, i, j)))
 overload(load4_texel, strict=False)(
     lambda a, i, j: (lambda a, i, j: _load4_texel_ir(a, i, j)))
