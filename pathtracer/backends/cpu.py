@@ -46,13 +46,21 @@ def feature_bits(features):
 
 @functools.lru_cache(maxsize=None)
 def pass_kernel(features):
-    if specialise(features).env_map:
-        return _deferred_pass_kernel(features)
-    render_pixel = make_render_pixel(features)
+    """The pass kernel for scenes with ``features``. With an environment map each row's
+    paths go through a ring whose records are finished a few paths later
+    (integrator.render_pixel_deferred: the escaped rays' texels prefetched meanwhile);
+    otherwise render_pixel adds a pixel's paths itself."""
+    deferred = specialise(features).env_map
+    if deferred:
+        render_pixel, drain = make_deferred_pixel(features)
+    else:
+        render_pixel, drain = make_render_pixel(features), None
+    ring = ESCAPE_RING if deferred else 0
 
     # error_model='numpy': float division by zero gives inf/nan as on the GPU, not an exception.
     # nogil: other Python threads (the live preview's server) run while a pass renders.
     # fastmath: kernels.device.FAST_MATH_FLAGS (no nnan / ninf), as the GPU's default.
+    # (branches on ``deferred``, a closure constant, are removed before typing)
     @njit(parallel=True, nogil=True, cache=jit_cache(), error_model="numpy",
           fastmath=set(FAST_MATH_FLAGS))
     def render_pass(out, stats, sample_start, n_samples, seed, max_bounces, rr_depth, scene,
@@ -64,48 +72,24 @@ def pass_kernel(features):
             if py >= height:
                 continue
             stack = np.empty(WIDE_STACK_SIZE, np.int32)   # traversal scratch, per row
-            for px in range(out.shape[1]):
-                if active[py, px]:
-                    render_pixel(px, py, sample_start, n_samples, seed, max_bounces,
-                                 rr_depth, scene, stack, out, stats)
-                else:                                # adaptive sampling: a finished pixel
-                    for c in range(out.shape[2]):
-                        out[py, px, c] = 0.0
-                        stats[py, px, c] = 0
-
-    return render_pass
-
-
-def _deferred_pass_kernel(features):
-    """render_pass for scenes with an environment map: each row's paths go through a ring
-    whose records finish a few paths later (integrator.render_pixel_deferred)."""
-    deferred = make_deferred_pixel(features)
-    render_pixel, drain = deferred.pixel, deferred.drain
-
-    @njit(parallel=True, nogil=True, cache=jit_cache(), error_model="numpy",
-          fastmath=set(FAST_MATH_FLAGS))
-    def render_pass(out, stats, sample_start, n_samples, seed, max_bounces, rr_depth, scene,
-                    active, threads):
-        height = out.shape[0]
-        rows_per = (height + threads - 1) // threads
-        for k in prange(rows_per * threads):
-            py = interleaved_row(k, rows_per, threads)
-            if py >= height:
-                continue
-            stack = np.empty(WIDE_STACK_SIZE, np.int32)   # traversal scratch, per row
-            esc_f = np.empty((ESCAPE_RING, ESC_F_WIDTH), np.float32)
-            esc_i = np.empty((ESCAPE_RING, ESC_I_WIDTH), np.int32)
+            esc_f = np.empty((ring, ESC_F_WIDTH), np.float32)
+            esc_i = np.empty((ring, ESC_I_WIDTH), np.int32)
             queued = 0
             for px in range(out.shape[1]):
                 if active[py, px]:
-                    queued = render_pixel(px, py, sample_start, n_samples, seed, max_bounces,
-                                          rr_depth, scene, stack, esc_f, esc_i, queued, out,
-                                          stats)
+                    if deferred:
+                        queued = render_pixel(px, py, sample_start, n_samples, seed,
+                                              max_bounces, rr_depth, scene, stack, esc_f,
+                                              esc_i, queued, out, stats)
+                    else:
+                        render_pixel(px, py, sample_start, n_samples, seed, max_bounces,
+                                     rr_depth, scene, stack, out, stats)
                 else:                                # adaptive sampling: a finished pixel
                     for c in range(out.shape[2]):
                         out[py, px, c] = 0.0
                         stats[py, px, c] = 0
-            drain(esc_f, esc_i, queued, py, scene, out, stats)
+            if deferred:
+                drain(esc_f, esc_i, queued, py, scene, out, stats)
 
     return render_pass
 

@@ -53,14 +53,20 @@ def _load4_typer(ndim):
     return typer
 
 
-def _load4_codegen(context, builder, signature, args):
-    """Four elements from a[i, j] (2-D: along the row; 3-D: along the last axis)."""
+def _item_pointer(context, builder, signature, args):
+    """The address of a[i, j] (a[i, j, 0] of a 3-D array), unchecked."""
     aryty, ity, jty = signature.args
     ary = context.make_array(aryty)(context, builder, args[0])
     inds = [context.cast(builder, args[1], ity, types.intp),
             context.cast(builder, args[2], jty, types.intp)]
     inds += [context.get_constant(types.intp, 0)] * (aryty.ndim - 2)
-    ptr = cgutils.get_item_pointer(context, builder, aryty, ary, inds, wraparound=False)
+    return cgutils.get_item_pointer(context, builder, aryty, ary, inds, wraparound=False)
+
+
+def _load4_codegen(context, builder, signature, args):
+    """Four elements from a[i, j] (2-D: along the row; 3-D: along the last axis)."""
+    aryty = signature.args[0]
+    ptr = _item_pointer(context, builder, signature, args)
     vty = ir.VectorType(context.get_data_type(aryty.dtype), 4)
     v = builder.load(builder.bitcast(ptr, vty.as_pointer()), align=vector_alignment(context))
     vals = [builder.extract_element(v, ir.Constant(ir.IntType(32), k)) for k in range(4)]
@@ -76,14 +82,8 @@ def _prefetch_ir(typingctx, a, i, j):
     def codegen(context, builder, signature, args):
         if "cuda" in type(context).__module__:
             return context.get_dummy_value()
-        aryty, ity, jty = signature.args
-        ary = context.make_array(aryty)(context, builder, args[0])
-        inds = [context.cast(builder, args[1], ity, types.intp),
-                context.cast(builder, args[2], jty, types.intp)]
-        inds += [context.get_constant(types.intp, 0)] * (aryty.ndim - 2)
-        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, inds, wraparound=False)
         i8p = ir.IntType(8).as_pointer()
-        ptr = builder.bitcast(ptr, i8p)
+        ptr = builder.bitcast(_item_pointer(context, builder, signature, args), i8p)
         i32 = ir.IntType(32)
         fn = cgutils.get_or_insert_function(
             builder.module, ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32]),
