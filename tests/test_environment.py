@@ -321,18 +321,13 @@ def test_compensated_sampling_chi_square():
     _check_sampling(img, 60.0, sub=8)
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
-def test_compensation_keeps_the_image(tmp_path, backend):
-    """Unbiasedness: a diffuse sphere and a rough metal sphere on a diffuse floor under the
-    synthetic sky with its sun, rendered with the compensated density and with the plain
-    one ("misCompensation": false; the same estimator otherwise): per pixel, the means of
-    24 renders of each agree within their standard errors (z-test). Where the compensated
-    density is 0, only BSDF sampling reaches the sky, with MIS weight 1: a wrong weight
-    there would lose or double the sky's light in the shadows."""
+def _spheres_under_the_sky(tmp_path):
+    """A diffuse and a rough metal sphere on a diffuse floor under _sky_with_sun (written
+    to tmp_path/sky.hdr), 8x8 pixels: a scene dictionary."""
     write_image(str(tmp_path / "sky.hdr"), _sky_with_sun())
     v, f = sphere_mesh(12, 24, radius=0.5)
     floor_v = [[-3, -0.5, -3], [3, -0.5, -3], [3, -0.5, 3], [-3, -0.5, 3]]
-    scene = {
+    return {
         "camera": {"resolution": [8, 8], "position": [0, 1.2, 3.2], "lookAt": [0, -0.1, 0],
                    "fov": 45},
         "render": {"spp": 64, "maxBounces": 4, "sampler": "independent"},
@@ -348,6 +343,17 @@ def test_compensation_keeps_the_image(tmp_path, backend):
              "material": "g"}],
         "environment": {"file": "sky.hdr", "rotation": 20},
     }
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_compensation_keeps_the_image(tmp_path, backend):
+    """Unbiasedness: a diffuse sphere and a rough metal sphere on a diffuse floor under the
+    synthetic sky with its sun, rendered with the compensated density and with the plain
+    one ("misCompensation": false; the same estimator otherwise): per pixel, the means of
+    24 renders of each agree within their standard errors (z-test). Where the compensated
+    density is 0, only BSDF sampling reaches the sky, with MIS weight 1: a wrong weight
+    there would lose or double the sky's light in the shadows."""
+    scene = _spheres_under_the_sky(tmp_path)
     stats = []
     for seed0, compensate in ((0, True), (1000, False)):
         scene["environment"]["misCompensation"] = compensate
@@ -363,3 +369,27 @@ def test_compensation_keeps_the_image(tmp_path, backend):
     z = (m1 - m0) / np.sqrt(se1 ** 2 + se0 ** 2 + 1e-12)
     assert np.abs(z).max() < 6.0, np.abs(z).max()      # 192 values, ~46 dof each
     assert np.abs(z).mean() < 1.1, np.abs(z).mean()    # E|z| ~ 0.8
+
+
+def test_cpu_ring_skips_finished_pixels(tmp_path):
+    """The CPU's pass for scenes with an environment map finishes each path a few paths
+    later from a ring per image row (integrator.render_pixel_deferred); pixels that
+    adaptive sampling has finished are skipped in between. The other pixels' sums and
+    counts are those of the pass over every pixel, bit for bit, and the finished pixels
+    are zero (each row holds 8 pixels x 5 paths, more than the ring's records)."""
+    from pathtracer.backends import make_backend
+    from pathtracer.kernels import layout as L
+    scene = load_scene(write_scene(tmp_path, _spheres_under_the_sky(tmp_path)))
+    assert scene.features.env_map and scene.width * 5 > L.ESCAPE_RING
+    backend = make_backend("cpu", scene)
+    full, full_stats = [x.copy() for x in backend.render_pass(0, 5, 3, 4, 3)]
+    active = np.ones((scene.height, scene.width), np.uint8)
+    active[::2, 1::3] = 0
+    active[3] = 0
+    active[5, :4] = 0
+    out, stats = backend.render_pass(0, 5, 3, 4, 3, active=active)
+    on = active.astype(bool)
+    np.testing.assert_array_equal(out[on], full[on])
+    np.testing.assert_array_equal(stats[on], full_stats[on])
+    assert not out[~on].any() and not stats[~on].any()
+    assert full[on].all() and full_stats[..., L.STAT_BOUNCE_RAYS].sum() > 0

@@ -490,6 +490,8 @@ def make_kernels(features, target="cpu"):
 
     @step
     def finish_record(esc_f, esc_i, slot, py, scene, out, stats):
+        """The record in ``slot`` added to its pixel's sums in row py: its radiance and,
+        if its last ray left, the sky's radiance there (MIS-weighted, times its beta)."""
         px = esc_i[slot, ESC_PX]
         radiance = (esc_f[slot, ESC_RADIANCE], esc_f[slot, ESC_RADIANCE + 1],
                     esc_f[slot, ESC_RADIANCE + 2])
@@ -509,6 +511,8 @@ def make_kernels(features, target="cpu"):
 
     @step
     def queue_record(esc_f, esc_i, slot, px, radiance, out_ray, beta, d, pdf_prev, scene):
+        """A finished path of pixel column px in ``slot`` (render_sample's answer); a ray
+        that left gets its map cell located and the cell's texels prefetched."""
         esc_i[slot, ESC_PX] = px
         esc_f[slot, ESC_RADIANCE] = radiance[0]
         esc_f[slot, ESC_RADIANCE + 1] = radiance[1]

@@ -11,6 +11,9 @@ bytes, j a multiple of 4 in a 2-D array, and a base address aligned to 16, which
 array that the CUDA backend copies to the device has (``cuda.to_device`` allocates, aligned
 to 256 bytes; checked in ``backends.cuda``). On the CPU the load is marked 4-byte aligned
 (x86 loads any alignment), so arrays from anywhere work.
+
+``prefetch(a, i, j)`` asks the CPU to bring a[i, j]'s cache line in early (the sky's texels
+of an escaped ray whose lookup comes a few paths later: integrator.render_pixel_deferred).
 """
 from llvmlite import ir
 from numba import types
