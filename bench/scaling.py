@@ -72,7 +72,7 @@ def measure(obj, backend_name, res, spp, repeats):
     else:
         backend = make_backend(backend_name, scene)
     if backend_name == "cpu":
-        # the CPU's four-wide tree (kernels.wide), collapsed from the binary one per backend
+        # the CPU's eight-wide tree (kernels.wide), collapsed from the binary one per backend
         from pathtracer.backends.cpu import cpu_arrays
         t0 = time.perf_counter()
         _, (_, (wide, wchild)) = cpu_arrays(scene.arrays)

@@ -1,8 +1,15 @@
-"""Closest-hit and any-hit rays/s of the binary and the CPU's four-wide BVH, on one scene:
+"""Closest-hit and any-hit rays/s of the binary and the CPU's eight-wide BVH, on one scene:
 
     python -m bench.traversal bunny-studio --rays 400000 --json out.json
     python -m bench.traversal bunny-studio --backend cuda --rays 4000000
     python -m bench.traversal bunny-studio --order origin
+    python -m bench.traversal bunny-studio --mitsuba
+
+``--mitsuba``: also Mitsuba 3's ``ray_intersect_preliminary`` and ``ray_test`` on the same
+rays and triangles (``llvm_ad_rgb`` on the CPU, ``cuda_ad_rgb`` with ``--backend cuda``:
+Embree / OptiX), each call a new ray batch evaluated and waited for; its rays start 1e-4
+scene sizes along their direction instead of skipping the triangle they leave, and its hits
+are checked to agree with ours on >= 99.9 % of the rays.
 
 Rays start on the scene's triangles (a uniform triangle, its centroid) in uniformly random
 directions, the triangle they leave skipped: rays as a path's bounce and shadow rays see
@@ -11,8 +18,8 @@ order, so that each ray's nodes are mostly not in the core's caches; ``--order o
 traces the same rays sorted by the triangle they leave (the BVH orders triangles by place),
 as a render on the CPU traces a pixel's samples one after another, whose bounce rays start
 close together: there the nodes near them stay cached (on the 2-core CPU, bunny-studio,
-2026-11-28: the four-wide tree's closest hits 1.08-1.14x and any hits 1.20-1.31x faster so,
-the binary tree's closest hits 1.45-1.65x). One traversal stack per 256 rays (the renderer allocates one per
+2026-11-28: the then four-wide tree's closest hits 1.08-1.14x and any hits 1.20-1.31x faster
+so, the binary tree's closest hits 1.45-1.65x). One traversal stack per 256 rays (the renderer allocates one per
 image row; one per ray made the allocator part of the figure). Both trees trace the same
 rays on all threads; the hits are checked equal (the same triangle, or the same distance:
 a ray through an edge two triangles share hits both at one t, and either may win).
@@ -105,6 +112,62 @@ def make_rays(tri_v, n_rays, order, seed=1):
     return origins, dirs, skip
 
 
+def mitsuba_rates(tri_v, origins, dirs, ours_hit, backend, repeats):
+    """({variant, closest_hit_rays_per_s, any_hit_rays_per_s}, fraction of rays whose
+    hit or miss agrees with ours) of Mitsuba 3 on the same triangles and rays, or (None,
+    None) with a note when Mitsuba cannot run here."""
+    from bench.common import usable_mitsuba
+    variant = "cuda_ad_rgb" if backend == "cuda" else "llvm_ad_rgb"
+    ok, why = usable_mitsuba(variant)
+    if not ok:
+        print(f"Mitsuba left out: {why}")
+        return None, None
+    import drjit as dr
+    import mitsuba as mi
+    mi.set_variant(variant)
+    tv = tri_v[:, :9].astype(np.float32)
+    verts = np.concatenate([tv[:, 0:3], tv[:, 0:3] + tv[:, 3:6], tv[:, 0:3] + tv[:, 6:9]],
+                           axis=1).reshape(-1, 3)
+    mesh = mi.Mesh("triangles", len(verts), len(tv), has_vertex_normals=False)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = mi.Float(verts.ravel())
+    params["faces"] = mi.UInt32(np.arange(len(verts), dtype=np.uint32))
+    params.update()
+    scene = mi.load_dict({"type": "scene", "triangles": mesh})
+    # (rays leave their triangle by a small step: Mitsuba has no triangle to skip)
+    step = np.float32(1e-4 * np.abs(verts).max())
+    o = origins + step * dirs
+    base = mi.Ray3f(mi.Point3f(*[mi.Float(o[:, k]) for k in range(3)]),
+                    mi.Vector3f(*[mi.Float(dirs[:, k]) for k in range(3)]))
+
+    def fresh():
+        # a new variable each call: Dr.Jit would otherwise reuse the last call's result
+        return mi.Ray3f(base.o + dr.opaque(mi.Float, 0.0), base.d)
+
+    def closest():
+        pi = scene.ray_intersect_preliminary(fresh())
+        dr.eval(pi.t, pi.prim_index)
+        dr.sync_thread()
+        return pi
+
+    def occluded():
+        r = scene.ray_test(fresh())
+        dr.eval(r)
+        dr.sync_thread()
+    rec = {"variant": variant}
+    for label, fn in (("closest_hit", closest), ("any_hit", occluded)):
+        fn()
+        fn()
+        times = []
+        for _ in range(repeats):
+            s = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - s)
+        rec[label + "_rays_per_s"] = len(origins) / float(np.median(times))
+    agree = float((np.isfinite(np.array(closest().t)) == ours_hit).mean())
+    return rec, agree
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("scene", choices=list(CONVERGENCE))
@@ -116,6 +179,8 @@ def main(argv=None):
     p.add_argument("--order", default="random", choices=("random", "origin"),
                    help="origin: the rays sorted by the triangle they leave, as coherent "
                         "as a pixel's bounce rays in a render (default: random order)")
+    p.add_argument("--mitsuba", action="store_true",
+                   help="also Mitsuba 3's closest and any hits on the same rays")
     p.add_argument("--json")
     args = p.parse_args(argv)
     from pathtracer.scene import compile_scene
@@ -131,16 +196,17 @@ def main(argv=None):
         from pathtracer.kernels.constants import STACK_SIZE
         trees = {"binary": (cuda_tracers(closest_hit, any_hit, STACK_SIZE), a.bvh_box,
                             a.bvh_child),
-                 "four-wide": (cuda_tracers(closest_hit_wide, any_hit_wide, WIDE_STACK_SIZE),
+                 "wide": (cuda_tracers(closest_hit_wide, any_hit_wide, WIDE_STACK_SIZE),
                                wide, wchild)}
         put, get = cuda.to_device, (lambda x: x.copy_to_host())
     else:
         trees = {"binary": (tracers(closest_hit, any_hit), a.bvh_box, a.bvh_child),
-                 "four-wide": (tracers(closest_hit_wide, any_hit_wide), wide, wchild)}
+                 "wide": (tracers(closest_hit_wide, any_hit_wide), wide, wchild)}
         put = get = (lambda x: x)
     rays = [put(x) for x in (origins, dirs, skip, a.tri_v)]
     out = {}
     hits = {}
+    agree = None
     for name, ((trace, shadow), box, child) in trees.items():
         t = put(np.empty(args.rays, np.float32))
         tri = put(np.empty(args.rays, np.int32))
@@ -161,7 +227,16 @@ def main(argv=None):
         out[name] = rec
         print(f"{args.scene} {name} ({args.order} order): closest hit {rec['closest_hit_rays_per_s'] / 1e6:.2f} M "
               f"rays/s, any hit {rec['any_hit_rays_per_s'] / 1e6:.2f} M rays/s")
-    (tri_a, hit_a, t_a), (tri_b, hit_b, t_b) = hits["binary"], hits["four-wide"]
+    if args.mitsuba:
+        rec, agree = mitsuba_rates(a.tri_v, origins, dirs, hits["binary"][0] >= 0,
+                                   args.backend, args.repeats)
+        if rec is not None:
+            out["mitsuba"] = rec
+            print(f"{args.scene} mitsuba {rec['variant']} ({args.order} order): closest hit "
+                  f"{rec['closest_hit_rays_per_s'] / 1e6:.2f} M rays/s, any hit "
+                  f"{rec['any_hit_rays_per_s'] / 1e6:.2f} M rays/s; hits agree on "
+                  f"{agree:.5f} of the rays")
+    (tri_a, hit_a, t_a), (tri_b, hit_b, t_b) = hits["binary"], hits["wide"]
     same = bool(((tri_a == tri_b) | (t_a == t_b)).all() and (hit_a == hit_b).all())
     print(f"same hits: {same}; hit fraction {float((hits['binary'][0] >= 0).mean()):.3f}; "
           f"collapse {widen_s * 1e3:.1f} ms (first call includes its compile)")
@@ -175,8 +250,9 @@ def main(argv=None):
                        "binary_nodes": int(len(a.bvh_box)), "wide_nodes": int(len(wchild)),
                        "wide_bytes": int(wide.nbytes + wchild.nbytes),
                        "binary_bytes": int(a.bvh_box.nbytes + a.bvh_child.nbytes),
-                       "same_hits": same, "results": out}, f, indent=1)
-    return 0 if same else 1
+                       "same_hits": same, "mitsuba_hits_agree": agree, "results": out}, f,
+                      indent=1)
+    return 0 if same and (agree is None or agree >= 0.999) else 1
 
 
 if __name__ == "__main__":

@@ -277,7 +277,7 @@ def test_watertight_counts_rays_that_slip_through():
     """bench.watertight: rays aimed at a closed sphere's edges from outside, those that
     clearly cross it (not grazing its silhouette: 84 % of those drawn here), and rays aimed
     at a split quad's diagonal; the counts are the cracks of the ray-triangle test. The
-    four-wide tree runs the binary tree's test bit for bit, so both lose the same rays;
+    eight-wide tree runs the binary tree's test bit for bit, so both lose the same rays;
     rays aimed at triangle interiors never slip through."""
     from bench.watertight import (CASES, QUAD_CASES, edge_rays, measure, measure_quads,
                                   sphere, trace)
@@ -333,7 +333,7 @@ def test_traversal_benchmark_on_the_cuda_simulator(tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     rec = json.loads(out.read_text())
     assert rec["same_hits"] and rec["backend"] == "cuda" and rec["order"] == "origin"
-    assert set(rec["results"]) == {"binary", "four-wide"}
+    assert set(rec["results"]) == {"binary", "wide"}
 
 
 def test_throughput_on_the_convergence_scenes_alternates_rounds(monkeypatch):

@@ -104,7 +104,7 @@ def check_against_brute_force(pos, origins, dirs, skips=None, **options):
     same = (i == ib) | (t == tb)
     assert same.all()
     assert np.array_equal(a, ib >= 0)   # any-hit agrees with the existence of a hit
-    # The CPU's four-wide tree (kernels.wide): the same hits, bit for bit, from the same
+    # The CPU's eight-wide tree (kernels.wide): the same hits, bit for bit, from the same
     # arithmetic in SIMD form; any-hit also with a second skipped triangle (its hit).
     wide, wchild = widen_bvh(tri_v, bvh.box, bvh.child)
     check_wide_structure(bvh, wide, wchild, tri_v, len(pos))
@@ -124,36 +124,42 @@ def check_against_brute_force(pos, origins, dirs, skips=None, **options):
 
 def check_wide_structure(bvh, wide, wchild, tri_v, n):
     """Every triangle in exactly one wide leaf, packed in its lane; every wide child box is
-    one of the binary tree's boxes; inner children point at later nodes; the traversal
-    stack suffices."""
+    one of the binary tree's boxes; inner children point at later nodes; the nodes' masks
+    of inner children and leaves are their counts'; the traversal stack suffices."""
+    from pathtracer.kernels import wide as W
     seen = np.zeros(n, int)
     binary_boxes = {tuple(b) for b in bvh.box.reshape(-1, 6).tolist()}
     flat = wide.reshape(-1)
     n_nodes = len(wchild)
     depth = np.zeros(n_nodes, int)
     depth[0] = 1
+    node_floats = W.NODE_ROWS * W.WIDE_ROW
     for k in range(n_nodes):
-        node = flat[24 * k:24 * k + 24]
-        for j in range(4):
-            cnt = wchild[k, 4 + j]
-            box = tuple(node[[j, 4 + j, 8 + j, 12 + j, 16 + j, 20 + j]].tolist())
+        node = flat[node_floats * k:node_floats * (k + 1)]
+        inner = leaves = 0
+        for j in range(W.WIDTH):
+            cnt = wchild[k, W.WCHILD_COUNT + j]
+            box = tuple(node[[j + W.WIDTH * a for a in range(6)]].tolist())
             if cnt < 0:
                 assert np.isnan(box).all()
                 continue
             assert box in binary_boxes
             if cnt == 0:
-                row = wchild[k, j]
-                assert row % 2 == 0 and k < row // 2 < n_nodes
-                depth[row // 2] = depth[k] + 1
+                inner |= 1 << j
+                row = wchild[k, W.WCHILD_INDEX + j]
+                assert row % W.NODE_ROWS == 0 and k < row // W.NODE_ROWS < n_nodes
+                depth[row // W.NODE_ROWS] = depth[k] + 1
             else:
-                first, row = wchild[k, 8 + j], wchild[k, j]
-                assert row >= 2 * n_nodes
+                leaves |= 1 << j
+                first, row = wchild[k, W.WCHILD_FIRST + j], wchild[k, W.WCHILD_INDEX + j]
+                assert row >= W.NODE_ROWS * n_nodes
                 seen[first:first + cnt] += 1
                 for t in range(cnt):
-                    group = flat[12 * (row + 3 * (t // 4)):][:36]
-                    assert np.array_equal(group[t % 4::4], tri_v[first + t])
+                    group = flat[W.WIDE_ROW * (row + W.GROUP_ROWS * (t // W.LANES)):][:36]
+                    assert np.array_equal(group[t % W.LANES::W.LANES], tri_v[first + t])
+        assert (wchild[k, W.WCHILD_INNER], wchild[k, W.WCHILD_LEAVES]) == (inner, leaves)
     assert (seen == 1).all()
-    assert 3 * depth.max() + 1 <= WIDE_STACK_SIZE
+    assert 2 * (W.WIDTH - 1) * depth.max() + 2 <= WIDE_STACK_SIZE
 
 
 def check_structure(bvh, pos):
@@ -341,8 +347,9 @@ def test_node_loads_read_the_node_layout(rng):
 
 
 def test_wide_traversal_interpreted_matches_compiled(rng):
-    """The four-wide traversal run as plain Python (the vector tests' Python forms,
-    kernels.wide.slab4 / triangles4) finds what the compiled SIMD code finds."""
+    """The eight-wide traversal run as plain Python (the vector tests' and bit helpers'
+    Python forms: kernels.wide.slab8, triangles4, entered, lowest_bit, float_bits) finds
+    what the compiled SIMD code finds."""
     pos = rng.random((300, 3, 3)).astype(np.float32)
     pos[:, 1:] = pos[:, :1] + 0.3 * (pos[:, 1:] - 0.5)       # small triangles in a cube
     bvh = build_bvh(pos)

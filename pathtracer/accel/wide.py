@@ -1,8 +1,8 @@
-"""The four-wide BVH of the CPU backend, collapsed from the binary BVH (see kernels.wide).
+"""The eight-wide BVH of the CPU backend, collapsed from the binary BVH (see kernels.wide).
 
 Each wide node starts from a binary node's two children and repeatedly replaces the inner
-child of largest surface area by its own two children until it has four (or only leaves
-are left), the usual collapse of a binary SAH tree into a BVH4 (Wald et al. 2008; Embree).
+child of largest surface area by its own two children until it has eight (or only leaves
+are left), the usual collapse of a binary SAH tree into a BVH8 (Wald et al. 2008; Embree).
 Leaves keep their triangles (the scene's numbering is unchanged: shading reads the same
 arrays) and get them packed four to a row for the SIMD triangle test. Linear in the node
 count: 3 ms for the 69k-triangle bunny, 0.16 s for the 1.6M-triangle dragon on the 2-core
@@ -16,11 +16,12 @@ from ..kernels.constants import STACK_SIZE
 from ..kernels.layout import (BOX_STRIDE, BOX_WIDTH, CHILD_COUNT, CHILD_INDEX, CHILD_STRIDE,
                               TRI_V_WIDTH)
 from ..kernels.wide import (GROUP_ROWS, LANES, NODE_ROWS, WCHILD_COUNT, WCHILD_FIRST,
-                            WCHILD_INDEX, WCHILD_WIDTH, WIDE_ROW)
+                            WCHILD_INDEX, WCHILD_INNER, WCHILD_LEAVES, WCHILD_WIDTH, WIDE_ROW,
+                            WIDTH)
 
-# closest_hit_wide pushes at most three nodes more than it pops per level of the wide tree,
-# which is no deeper than the binary one (MAX_DEPTH = STACK_SIZE - 4 levels)
-WIDE_STACK_SIZE = 3 * STACK_SIZE + 4
+# closest_hit_wide pushes at most seven (node, distance) pairs more than it pops per level of
+# the wide tree, which is no deeper than the binary one (MAX_DEPTH = STACK_SIZE - 4 levels)
+WIDE_STACK_SIZE = 2 * (WIDTH - 1) * STACK_SIZE + 8
 
 
 @njit(cache=jit_cache())
@@ -97,7 +98,7 @@ def _collapse(box, child, merge):
     sub_first, sub_count = _small_subtrees(child, merge)
     wbox = np.full((n, NODE_ROWS * WIDE_ROW), np.nan, np.float32)
     wchild = np.zeros((n, WCHILD_WIDTH), np.int32)
-    wchild[:, WCHILD_COUNT:WCHILD_COUNT + LANES] = -1
+    wchild[:, WCHILD_COUNT:WCHILD_COUNT + WIDTH] = -1
     todo_bin = np.empty(n + 1, np.int64)      # (binary node, wide node, wide depth)
     todo_wide = np.empty(n + 1, np.int64)
     todo_depth = np.empty(n + 1, np.int64)
@@ -107,9 +108,9 @@ def _collapse(box, child, merge):
     n_todo = 1
     n_wide = 1
     depth = 1
-    kid_box = np.empty((LANES, 6), np.float32)
-    kid_index = np.empty(LANES, np.int64)
-    kid_count = np.empty(LANES, np.int64)
+    kid_box = np.empty((WIDTH, 6), np.float32)
+    kid_index = np.empty(WIDTH, np.int64)
+    kid_count = np.empty(WIDTH, np.int64)
     while n_todo > 0:
         n_todo -= 1
         b = todo_bin[n_todo]
@@ -122,7 +123,7 @@ def _collapse(box, child, merge):
                 _take_child(box, child, b, s, sub_first, sub_count, kid_box, kid_index,
                             kid_count, k)
                 k += 1
-        while k < LANES:
+        while k < WIDTH:
             best = -1
             best_area = np.float32(-1.0)
             for j in range(k):
@@ -154,11 +155,12 @@ def _collapse(box, child, merge):
                 kid_count[best] = kid_count[k]
         for j in range(k):
             for a in range(3):
-                wbox[w, 4 * a + j] = kid_box[j, a]
-                wbox[w, 12 + 4 * a + j] = kid_box[j, 3 + a]
+                wbox[w, WIDTH * a + j] = kid_box[j, a]
+                wbox[w, WIDTH * (3 + a) + j] = kid_box[j, 3 + a]
             if kid_count[j] == 0:
                 wchild[w, WCHILD_INDEX + j] = NODE_ROWS * n_wide     # its first row
                 wchild[w, WCHILD_COUNT + j] = 0
+                wchild[w, WCHILD_INNER] |= 1 << j
                 todo_bin[n_todo] = kid_index[j]
                 todo_wide[n_todo] = n_wide
                 todo_depth[n_todo] = d + 1
@@ -167,6 +169,7 @@ def _collapse(box, child, merge):
             else:
                 wchild[w, WCHILD_FIRST + j] = kid_index[j]
                 wchild[w, WCHILD_COUNT + j] = kid_count[j]
+                wchild[w, WCHILD_LEAVES] |= 1 << j
     return wbox[:n_wide].copy(), wchild[:n_wide].copy(), depth
 
 
@@ -177,7 +180,7 @@ def _pack(tri_v, wbox, wchild):
     n_nodes = wbox.shape[0]
     n_groups = 0
     for node in range(n_nodes):
-        for j in range(LANES):
+        for j in range(WIDTH):
             count = wchild[node, WCHILD_COUNT + j]
             if count > 0:
                 n_groups += (count + LANES - 1) // LANES
@@ -186,7 +189,7 @@ def _pack(tri_v, wbox, wchild):
     flat[:wbox.size] = wbox.reshape(-1)
     row = NODE_ROWS * n_nodes
     for node in range(n_nodes):
-        for j in range(LANES):
+        for j in range(WIDTH):
             count = wchild[node, WCHILD_COUNT + j]
             if count > 0:
                 first = wchild[node, WCHILD_FIRST + j]
@@ -206,5 +209,5 @@ def widen_bvh(tri_v, bvh_box, bvh_child, merge=LANES):
     # (read-only, as in a Ray worker: one compiled version, see _cache.read_only)
     tri_v, bvh_box, bvh_child = read_only(tri_v), read_only(bvh_box), read_only(bvh_child)
     wbox, wchild, depth = _collapse(bvh_box, bvh_child, merge)
-    assert 3 * depth + 1 <= WIDE_STACK_SIZE, depth
+    assert 2 * (WIDTH - 1) * depth + 2 <= WIDE_STACK_SIZE, depth
     return _pack(tri_v, wbox, wchild), wchild

@@ -112,7 +112,7 @@ def make_kernels(features, target="cpu"):
     ANY_ENVIRONMENT = S.any_environment
     NEE = S.nee
     MIPMAPS = S.mipmaps
-    # The CPU traverses the four-wide BVH (kernels.wide: SIMD box and triangle tests), whose
+    # The CPU traverses the eight-wide BVH (kernels.wide: SIMD box and triangle tests), whose
     # arrays its backend puts in the scene's bvh_box and bvh_child; the GPU the binary one.
     WIDE = target == "cpu"
     trace_closest = closest_hit_wide if WIDE else closest_hit

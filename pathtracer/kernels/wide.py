@@ -1,35 +1,46 @@
-"""Four-wide BVH traversal with SIMD box and triangle tests (the CPU's traversal).
+"""Eight-wide BVH traversal with SIMD box and triangle tests (the CPU's traversal).
 
 The binary BVH (:mod:`.traverse`) tests two boxes per node and one triangle at a time, in
 scalar code: on the CPU, where a core runs one path at a time, that leaves its vector units
-idle. Here the binary tree is collapsed into nodes of up to four children (Wald et al. 2008,
-"Getting Rid of Packets"; Embree's BVH4), whose boxes are stored as struct-of-arrays rows so
-that one ``<4 x float>`` operation handles a coordinate of all four, and the triangles of
-each leaf are packed in groups of four the same way (Moller-Trumbore on four triangles at
-once). Both tests are written as LLVM vector IR (:func:`slab4`, :func:`triangles4`), as
-Numba does not vectorise the scalar forms; the arithmetic is the scalar tests' own,
-operation for operation, so hit distances and barycentrics are bit-identical to
-:func:`.intersect.slab` and :func:`.intersect.ray_triangle` (tested).
+idle. Here the binary tree is collapsed into nodes of up to eight children (Wald et al.
+2008, "Getting Rid of Packets"; Embree's BVH8 on AVX2 machines), whose boxes are stored as
+struct-of-arrays rows so that one ``<8 x float>`` operation handles a coordinate of all
+eight, and the triangles of each leaf are packed in groups of four the same way
+(Moller-Trumbore on four triangles at once). Both tests are written as LLVM vector IR
+(:func:`slab8`, :func:`triangles4`), as Numba does not vectorise the scalar forms; the
+arithmetic is the scalar tests' own, operation for operation, so hit distances and
+barycentrics are bit-identical to :func:`.intersect.slab` and
+:func:`.intersect.ray_triangle` (tested).
+
+The traversal follows Embree's for one ray: the boxes a ray enters are a bit mask; a single
+inner child entered is descended without touching the stack, two are ordered by one
+comparison, more are pushed and sorted by entry distance. The stack holds each node's
+entry distance, so a node popped after a nearer hit was found is dropped unopened (its
+children's boxes lie inside its box). A node's leaves are intersected when it is visited.
 
 Layout (built by :func:`pathtracer.accel.wide.widen_bvh` from the binary BVH). The CPU
 backend passes these arrays in the scene's ``bvh_box`` and ``bvh_child`` slots (same types
 as the binary tree's), so the kernels' arguments and types do not change:
 
-- ``wide`` float32 (R, 12): rows of 12 floats holding nodes (two rows each: lo_x[4],
-  lo_y[4], lo_z[4], hi_x[4], hi_y[4], hi_z[4] of the four children) and then groups of four
+- ``wide`` float32 (R, 12): rows of 12 floats holding nodes (four rows each: lo_x[8],
+  lo_y[8], lo_z[8], hi_x[8], hi_y[8], hi_z[8] of the eight children) and then groups of four
   triangles (three rows each: v0x[4], v0y[4], v0z[4], e1x[4], ..., e2z[4]); lanes past a
-  leaf's end are zero triangles (det = 0: never hit). Node n starts at row 2n, so 12 floats
-  per row wastes nothing;
-- ``wchild`` int32 (B, 12), row n for node n: index[4], count[4], first[4]. count > 0: a
-  leaf of ``count`` triangles, the first being triangle ``first`` (the scene's numbering,
-  which shading reads), packed in the groups starting at row ``index``; 0: an inner node
-  whose rows start at ``index``; -1: no child (its box is NaN, which no ray enters).
+  leaf's end are zero triangles (det = 0: never hit). Node n starts at row 4n;
+- ``wchild`` int32 (B, 32), row n for node n: index[8], count[8], first[8], then the bit
+  masks of its inner children and of its leaves (and six unused). count > 0: a leaf of
+  ``count`` triangles, the first being triangle ``first`` (the scene's numbering, which
+  shading reads), packed in the groups starting at row ``index``; 0: an inner node whose
+  rows start at ``index``; -1: no child (its box is NaN, which no ray enters);
+- the traversal stack (int32, ``accel.wide.WIDE_STACK_SIZE``): the closest-hit traversal
+  pushes pairs of a node's row and the bits of its entry distance (a float32 >= 0, whose
+  bits order as the floats do), the any-hit traversal rows alone.
 
 Only the CPU backend builds these arrays; the GPU keeps the binary tree, whose traversal
 was tuned there (vector loads of its nodes, docs/benchmarks.md). This code is plain Numba
 and LLVM IR that the CUDA target compiles too (``python -m bench.traversal --backend
-cuda``), and there it loses: on an H200 the wide tree traced 0.64-0.88x the binary one's
-closest hits and 0.76-0.80x its any hits (docs/benchmarks.md, 2026-11-27).
+cuda``), and there the wide tree lost when it was four-wide: on an H200 it traced
+0.64-0.88x the binary one's closest hits and 0.76-0.80x its any hits (docs/benchmarks.md,
+2026-11-27).
 """
 import math
 
@@ -42,28 +53,48 @@ from numba.extending import intrinsic, overload
 from .constants import INF, SLAB_SCALE, ZERO
 from .device import device
 from .intersect import ray_triangle, safe_inverse, slab
-from .loads import load4, vector_alignment
+from .loads import vector_alignment
 
 WIDE_ROW = 12         # floats per row of ``wide``
-NODE_ROWS = 2         # a node's 24 floats
+WIDTH = 8             # children per node
+NODE_ROWS = 4         # a node's 48 floats
 GROUP_ROWS = 3        # a triangle group's 36 floats
-WCHILD_WIDTH = 12
+LANES = 4             # triangles per group
+WCHILD_WIDTH = 32
 WCHILD_INDEX = 0
-WCHILD_COUNT = 4
-WCHILD_FIRST = 8
-LANES = 4
+WCHILD_COUNT = 8
+WCHILD_FIRST = 16
+WCHILD_INNER = 24     # bit k set: child k is an inner node
+WCHILD_LEAVES = 25    # bit k set: child k is a leaf
 
 
-# ---- the two vector tests: Python forms (interpreted mode, tests) and their IR -----------------
+# ---- the vector tests and bit helpers: Python forms (interpreted mode, tests) and their IR ----
 
-def slab4(wide, row, ox, oy, oz, ix, iy, iz, t_max):
-    """Entry distances (or INF) of the ray into the four child boxes of the node whose rows
-    start at ``row``: the scalar slab test (intersect.slab) on each."""
+def slab8(wide, row, ox, oy, oz, ix, iy, iz, t_max):
+    """Entry distances (or INF) of the ray into the eight child boxes of the node whose
+    rows start at ``row``: the scalar slab test (intersect.slab) on each."""
     f = wide[row:row + NODE_ROWS].reshape(-1)
     o = (ox, oy, oz)
     inv = (ix, iy, iz)
-    return tuple(slab(o, inv, f[k], f[4 + k], f[8 + k], f[12 + k], f[16 + k], f[20 + k],
-                      t_max) for k in range(LANES))
+    w = WIDTH
+    return tuple(slab(o, inv, f[k], f[w + k], f[2 * w + k], f[3 * w + k], f[4 * w + k],
+                      f[5 * w + k], t_max) for k in range(WIDTH))
+
+
+def entered(ts):
+    """The bit mask of the lanes of ``ts`` (slab8's distances) below INF."""
+    return sum(1 << k for k in range(WIDTH) if ts[k] < INF)
+
+
+def lowest_bit(m):
+    """The number of the lowest set bit of m > 0."""
+    m = int(m)
+    return (m & -m).bit_length() - 1
+
+
+def float_bits(x):
+    """The bits of the float32 x as an int32."""
+    return int(np.array(x, np.float32).view(np.int32))
 
 
 def triangles4(wide, row, ox, oy, oz, dx, dy, dz, t_max, skip_a, skip_b):
@@ -83,24 +114,24 @@ def triangles4(wide, row, ox, oy, oz, dx, dy, dz, t_max, skip_a, skip_b):
     return tuple(ts) + tuple(b1s) + tuple(b2s)
 
 
-def _vector_helpers(context, builder):
+def _vector_helpers(context, builder, n=LANES):
     fl = ir.FloatType()
-    v4 = ir.VectorType(fl, LANES)
+    vn = ir.VectorType(fl, n)
     i32 = ir.IntType(32)
 
     def splat(x):
-        v = ir.Constant(v4, ir.Undefined)
-        for k in range(LANES):
+        v = ir.Constant(vn, ir.Undefined)
+        for k in range(n):
             v = builder.insert_element(v, x, ir.Constant(i32, k))
         return v
 
     def lanes(v):
-        return [builder.extract_element(v, ir.Constant(i32, k)) for k in range(LANES)]
-    return v4, splat, lanes
+        return [builder.extract_element(v, ir.Constant(i32, k)) for k in range(n)]
+    return vn, splat, lanes
 
 
 def _row_loader(context, builder, aryty, ary_value, row_value, row_type, v4):
-    """load(k): the four floats at offset k from the start of row ``row`` of a C-contiguous
+    """load(k): the floats of vector type v4 (four or eight) at offset k from the start of row ``row`` of a C-contiguous
     float32 array (offsets past the row run on into the next rows)."""
     ary = context.make_array(aryty)(context, builder, ary_value)
     row = context.cast(builder, row_value, row_type, types.intp)
@@ -109,7 +140,7 @@ def _row_loader(context, builder, aryty, ary_value, row_value, row_type, v4):
                                      wraparound=False)
 
     # (on the GPU 16-byte aligned: rows of 48 bytes from an allocation aligned to 256,
-    # offsets k of whole vectors)
+    # offsets k of whole four-float vectors)
     align = vector_alignment(context)
 
     def load(k):
@@ -124,16 +155,16 @@ def _is_float32_rows(a):
 
 
 @intrinsic
-def _slab4_ir(typingctx, wide, row, ox, oy, oz, ix, iy, iz, t_max):
+def _slab8_ir(typingctx, wide, row, ox, oy, oz, ix, iy, iz, t_max):
     if not (_is_float32_rows(wide) and isinstance(row, types.Integer)):
         return None
     f32 = types.float32
-    sig = types.UniTuple(f32, LANES)(wide, row, f32, f32, f32, f32, f32, f32, f32)
+    sig = types.UniTuple(f32, WIDTH)(wide, row, f32, f32, f32, f32, f32, f32, f32)
 
     def codegen(context, builder, signature, args):
-        v4, splat, lanes = _vector_helpers(context, builder)
+        v8, splat, lanes = _vector_helpers(context, builder, WIDTH)
         row = _row_loader(context, builder, signature.args[0], args[0], args[1],
-                          signature.args[1], v4)
+                          signature.args[1], v8)
         o = [splat(a) for a in args[2:5]]
         inv = [splat(a) for a in args[5:8]]
 
@@ -145,16 +176,16 @@ def _slab4_ir(typingctx, wide, row, ox, oy, oz, ix, iy, iz, t_max):
             return builder.select(builder.fcmp_ordered(">", b, a), b, a)
         near, far = [], []
         for axis in range(3):
-            t0 = builder.fmul(builder.fsub(row(4 * axis), o[axis]), inv[axis])
-            t1 = builder.fmul(builder.fsub(row(12 + 4 * axis), o[axis]), inv[axis])
+            t0 = builder.fmul(builder.fsub(row(WIDTH * axis), o[axis]), inv[axis])
+            t1 = builder.fmul(builder.fsub(row(WIDTH * (3 + axis)), o[axis]), inv[axis])
             near.append(vmin(t0, t1))
             far.append(vmax(t0, t1))
-        zero = ir.Constant(v4, [0.0] * LANES)
+        zero = ir.Constant(v8, [0.0] * WIDTH)
         t_near = vmax(vmax(near[0], near[1]), vmax(near[2], zero))
         t_far = builder.fmul(vmin(vmin(far[0], far[1]), vmin(far[2], splat(args[8]))),
-                             ir.Constant(v4, [float(SLAB_SCALE)] * LANES))
+                             ir.Constant(v8, [float(SLAB_SCALE)] * WIDTH))
         res = builder.select(builder.fcmp_ordered("<=", t_near, t_far), t_near,
-                             ir.Constant(v4, [math.inf] * LANES))
+                             ir.Constant(v8, [math.inf] * WIDTH))
         return context.make_tuple(builder, signature.return_type, lanes(res))
     return sig, codegen
 
@@ -213,14 +244,59 @@ def _triangles4_ir(typingctx, wide, row, ox, oy, oz, dx, dy, dz, t_max, skip_a, 
     return sig, codegen
 
 
-overload(slab4, strict=False)(
+@intrinsic
+def _entered_ir(typingctx, ts):
+    if not (isinstance(ts, types.UniTuple) and ts.count == WIDTH and ts.dtype == types.float32):
+        return None
+
+    def codegen(context, builder, signature, args):
+        v8, _, _ = _vector_helpers(context, builder, WIDTH)
+        v = ir.Constant(v8, ir.Undefined)
+        for k in range(WIDTH):
+            v = builder.insert_element(v, builder.extract_value(args[0], k),
+                                       ir.Constant(ir.IntType(32), k))
+        # (LLVM folds this vector back into slab8's: one compare and a vmovmskps)
+        below = builder.fcmp_ordered("<", v, ir.Constant(v8, [math.inf] * WIDTH))
+        return builder.zext(builder.bitcast(below, ir.IntType(WIDTH)), ir.IntType(64))
+    return types.int64(ts), codegen
+
+
+@intrinsic
+def _lowest_bit_ir(typingctx, m):
+    if not isinstance(m, types.Integer):
+        return None
+
+    def codegen(context, builder, signature, args):
+        ty = args[0].type
+        fn = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(ty, [ty, ir.IntType(1)]), f"llvm.cttz.i{ty.width}")
+        return builder.call(fn, [args[0], ir.Constant(ir.IntType(1), 1)])
+    return m(m), codegen
+
+
+@intrinsic
+def _float_bits_ir(typingctx, x):
+    if x != types.float32:
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.IntType(32))
+    return types.int32(x), codegen
+
+
+overload(slab8, strict=False)(
     lambda wide, row, ox, oy, oz, ix, iy, iz, t_max:
     (lambda wide, row, ox, oy, oz, ix, iy, iz, t_max:
-     _slab4_ir(wide, row, ox, oy, oz, ix, iy, iz, t_max)))
+     _slab8_ir(wide, row, ox, oy, oz, ix, iy, iz, t_max)))
+overload(entered, strict=False)(lambda ts: (lambda ts: _entered_ir(ts)))
+overload(lowest_bit, strict=False)(lambda m: (lambda m: _lowest_bit_ir(m)))
+overload(float_bits, strict=False)(lambda x: (lambda x: _float_bits_ir(x)))
 overload(triangles4, strict=False)(
     lambda wide, row, ox, oy, oz, dx, dy, dz, t_max, skip_a, skip_b:
     (lambda wide, row, ox, oy, oz, dx, dy, dz, t_max, skip_a, skip_b:
      _triangles4_ir(wide, row, ox, oy, oz, dx, dy, dz, t_max, skip_a, skip_b)))
+
+
 
 
 # ---- traversal ----------------------------------------------------------------------------
@@ -247,62 +323,79 @@ def _leaf(o, d, wide, row, first, count, skip, t_best, tri_best, b1_best, b2_bes
 
 
 @device
+def _push(stack, sp, row, t):
+    stack[sp] = row
+    stack[sp + 1] = float_bits(t)
+    return sp + 2
+
+
+@device
 def closest_hit_wide(o, d, t_max, skip, tri_v, wide, wchild, stack):
-    """closest_hit over the four-wide tree: nearest hit (t, tri, b1, b2) with
+    """closest_hit over the eight-wide tree: nearest hit (t, tri, b1, b2) with
     0 < t < t_max, ignoring triangle ``skip``; tri = -1 on a miss."""
     inv_d = safe_inverse(d)
     t_best = t_max
     tri_best = -1
     b1_best = ZERO
     b2_best = ZERO
-    stack[0] = 0
-    sp = 1
-    while sp > 0:
-        sp -= 1
-        row = stack[sp]
-        t0, t1, t2, t3 = slab4(wide, row, o[0], o[1], o[2], inv_d[0], inv_d[1], inv_d[2],
-                               t_best)
+    row = 0
+    sp = 0
+    while True:
+        ts = slab8(wide, row, o[0], o[1], o[2], inv_d[0], inv_d[1], inv_d[2], t_best)
+        hit = entered(ts)
         node = row // NODE_ROWS
-        c0, c1, c2, c3 = load4(wchild, node, WCHILD_INDEX)
-        n0, n1, n2, n3 = load4(wchild, node, WCHILD_COUNT)
-        f0, f1, f2, f3 = load4(wchild, node, WCHILD_FIRST)
-        # the children nearest first: a five-comparator sorting network
-        if t1 < t0:
-            t0, t1, c0, c1, n0, n1, f0, f1 = t1, t0, c1, c0, n1, n0, f1, f0
-        if t3 < t2:
-            t2, t3, c2, c3, n2, n3, f2, f3 = t3, t2, c3, c2, n3, n2, f3, f2
-        if t2 < t0:
-            t0, t2, c0, c2, n0, n2, f0, f2 = t2, t0, c2, c0, n2, n0, f2, f0
-        if t3 < t1:
-            t1, t3, c1, c3, n1, n3, f1, f3 = t3, t1, c3, c1, n3, n1, f3, f1
-        if t2 < t1:
-            t1, t2, c1, c2, n1, n2, f1, f2 = t2, t1, c2, c1, n2, n1, f2, f1
-        # inner children on the stack, farthest lowest; leaves intersected at once, nearest
-        # first, a farther one only while still in front (see traverse.closest_hit)
-        if t3 < INF and n3 == 0:
-            stack[sp] = c3
-            sp += 1
-        if t2 < INF and n2 == 0:
-            stack[sp] = c2
-            sp += 1
-        if t1 < INF and n1 == 0:
-            stack[sp] = c1
-            sp += 1
-        if t0 < INF and n0 == 0:
-            stack[sp] = c0
-            sp += 1
-        if t0 < INF and n0 > 0:
-            t_best, tri_best, b1_best, b2_best = _leaf(
-                o, d, wide, c0, f0, n0, skip, t_best, tri_best, b1_best, b2_best)
-        if t1 < INF and n1 > 0 and t1 <= t_best * SLAB_SCALE:
-            t_best, tri_best, b1_best, b2_best = _leaf(
-                o, d, wide, c1, f1, n1, skip, t_best, tri_best, b1_best, b2_best)
-        if t2 < INF and n2 > 0 and t2 <= t_best * SLAB_SCALE:
-            t_best, tri_best, b1_best, b2_best = _leaf(
-                o, d, wide, c2, f2, n2, skip, t_best, tri_best, b1_best, b2_best)
-        if t3 < INF and n3 > 0 and t3 <= t_best * SLAB_SCALE:
-            t_best, tri_best, b1_best, b2_best = _leaf(
-                o, d, wide, c3, f3, n3, skip, t_best, tri_best, b1_best, b2_best)
+        # the leaves entered, in lane order, each while still in front
+        leaves = hit & wchild[node, WCHILD_LEAVES]
+        while leaves != 0:
+            k = lowest_bit(leaves)
+            leaves &= leaves - 1
+            if ts[k] <= t_best * SLAB_SCALE:
+                t_best, tri_best, b1_best, b2_best = _leaf(
+                    o, d, wide, wchild[node, WCHILD_INDEX + k], wchild[node, WCHILD_FIRST + k],
+                    wchild[node, WCHILD_COUNT + k], skip, t_best, tri_best, b1_best, b2_best)
+        inner = hit & wchild[node, WCHILD_INNER]
+        if inner != 0:
+            k0 = lowest_bit(inner)
+            inner &= inner - 1
+            if inner == 0:                      # one: straight down
+                row = wchild[node, WCHILD_INDEX + k0]
+                continue
+            k1 = lowest_bit(inner)
+            inner &= inner - 1
+            if inner == 0:                      # two: the farther one on the stack
+                if ts[k1] < ts[k0]:
+                    k0, k1 = k1, k0
+                sp = _push(stack, sp, wchild[node, WCHILD_INDEX + k1], ts[k1])
+                row = wchild[node, WCHILD_INDEX + k0]
+                continue
+            # more: all on the stack, sorted so that the nearest is on top
+            base = sp
+            sp = _push(stack, sp, wchild[node, WCHILD_INDEX + k0], ts[k0])
+            sp = _push(stack, sp, wchild[node, WCHILD_INDEX + k1], ts[k1])
+            while inner != 0:
+                k = lowest_bit(inner)
+                inner &= inner - 1
+                sp = _push(stack, sp, wchild[node, WCHILD_INDEX + k], ts[k])
+            j = base + 2
+            while j < sp:                       # insertion sort, farthest lowest
+                key_row = stack[j]
+                key = stack[j + 1]
+                q = j
+                while q > base and stack[q - 1] < key:
+                    stack[q] = stack[q - 2]
+                    stack[q + 1] = stack[q - 1]
+                    q -= 2
+                stack[q] = key_row
+                stack[q + 1] = key
+                j += 2
+        # the nearest node on the stack still in front (farther ones are dropped unopened)
+        limit = float_bits(t_best * SLAB_SCALE)
+        while sp > 0 and stack[sp - 1] > limit:
+            sp -= 2
+        if sp == 0:
+            break
+        sp -= 2
+        row = stack[sp]
     if tri_best < 0:
         return INF, -1, ZERO, ZERO
     return t_best, tri_best, b1_best, b2_best
@@ -323,24 +416,33 @@ def _leaf_blocks(o, d, wide, row, first, count, t_max, skip_a, skip_b):
 
 @device
 def any_hit_wide(o, d, t_max, skip_a, skip_b, tri_v, wide, wchild, stack):
-    """any_hit over the four-wide tree: True if any triangle other than skip_a and skip_b is
-    hit with 0 < t < t_max."""
+    """any_hit over the eight-wide tree: True if any triangle other than skip_a and skip_b
+    is hit with 0 < t < t_max."""
     inv_d = safe_inverse(d)
-    stack[0] = 0
-    sp = 1
-    while sp > 0:
+    row = 0
+    sp = 0
+    while True:
+        ts = slab8(wide, row, o[0], o[1], o[2], inv_d[0], inv_d[1], inv_d[2], t_max)
+        hit = entered(ts)
+        node = row // NODE_ROWS
+        leaves = hit & wchild[node, WCHILD_LEAVES]
+        while leaves != 0:
+            k = lowest_bit(leaves)
+            leaves &= leaves - 1
+            if _leaf_blocks(o, d, wide, wchild[node, WCHILD_INDEX + k],
+                            wchild[node, WCHILD_FIRST + k], wchild[node, WCHILD_COUNT + k],
+                            t_max, skip_a, skip_b):
+                return True
+        inner = hit & wchild[node, WCHILD_INNER]
+        if inner != 0:                          # the lowest lane next, the others stacked
+            row = wchild[node, WCHILD_INDEX + lowest_bit(inner)]
+            inner &= inner - 1
+            while inner != 0:
+                stack[sp] = wchild[node, WCHILD_INDEX + lowest_bit(inner)]
+                sp += 1
+                inner &= inner - 1
+            continue
+        if sp == 0:
+            return False
         sp -= 1
         row = stack[sp]
-        ts = slab4(wide, row, o[0], o[1], o[2], inv_d[0], inv_d[1], inv_d[2], t_max)
-        node = row // NODE_ROWS
-        for k in range(LANES):
-            if ts[k] < INF:
-                n = wchild[node, WCHILD_COUNT + k]
-                if n == 0:
-                    stack[sp] = wchild[node, WCHILD_INDEX + k]
-                    sp += 1
-                elif n > 0 and _leaf_blocks(o, d, wide, wchild[node, WCHILD_INDEX + k],
-                                            wchild[node, WCHILD_FIRST + k], n, t_max, skip_a,
-                                            skip_b):
-                    return True
-    return False
