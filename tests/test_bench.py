@@ -336,6 +336,25 @@ def test_traversal_benchmark_on_the_cuda_simulator(tmp_path):
     assert set(rec["results"]) == {"binary", "wide"}
 
 
+def test_traversal_benchmark_against_mitsuba(tmp_path):
+    """bench.traversal --mitsuba: Mitsuba 3's closest and any hits (Embree) on the same
+    rays and triangles beside both of our trees, and its hits agree with ours."""
+    import json
+    from bench.common import usable_mitsuba
+    ok, why = usable_mitsuba("llvm_ad_rgb")
+    if not ok:
+        pytest.skip(f"Mitsuba not usable here: {why}")
+    out = tmp_path / "t.json"
+    r = subprocess.run([sys.executable, "-m", "bench.traversal", "cornell-box", "--rays",
+                        "3000", "--repeats", "1", "--mitsuba", "--json", str(out)],
+                       cwd=ROOT, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-2000:]
+    rec = json.loads(out.read_text())
+    assert set(rec["results"]) == {"binary", "wide", "mitsuba"}
+    assert rec["results"]["mitsuba"]["closest_hit_rays_per_s"] > 0
+    assert rec["same_hits"] and rec["mitsuba_hits_agree"] >= 0.999
+
+
 def test_throughput_on_the_convergence_scenes_alternates_rounds(monkeypatch):
     """`python -m bench.throughput --cpu --scenes ...`: a figure per round for pt-render,
     at the scene's benchmark size; without a usable Mitsuba the peer's rounds are left
