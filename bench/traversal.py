@@ -125,10 +125,10 @@ def mitsuba_rates(tri_v, origins, dirs, ours_hit, backend, repeats):
     import drjit as dr
     import mitsuba as mi
     mi.set_variant(variant)
-    tv = tri_v[:, :9].astype(np.float32)
-    verts = np.concatenate([tv[:, 0:3], tv[:, 0:3] + tv[:, 3:6], tv[:, 0:3] + tv[:, 6:9]],
-                           axis=1).reshape(-1, 3)
-    mesh = mi.Mesh("triangles", len(verts), len(tv), has_vertex_normals=False)
+    from pathtracer.kernels.layout import TRI_E1, TRI_E2, TRI_V0
+    v0, e1, e2 = (tri_v[:, c:c + 3].astype(np.float32) for c in (TRI_V0, TRI_E1, TRI_E2))
+    verts = np.concatenate([v0, v0 + e1, v0 + e2], axis=1).reshape(-1, 3)
+    mesh = mi.Mesh("triangles", len(verts), len(tri_v), has_vertex_normals=False)
     params = mi.traverse(mesh)
     params["vertex_positions"] = mi.Float(verts.ravel())
     params["faces"] = mi.UInt32(np.arange(len(verts), dtype=np.uint32))
