@@ -5,8 +5,9 @@ child of largest surface area by its own two children until it has eight (or onl
 are left), the usual collapse of a binary SAH tree into a BVH8 (Wald et al. 2008; Embree).
 Leaves keep their triangles (the scene's numbering is unchanged: shading reads the same
 arrays) and get them packed four to a row for the SIMD triangle test. Linear in the node
-count: 3 ms for the 69k-triangle bunny, 0.16 s for the 1.6M-triangle dragon on the 2-core
-CPU (bench/results/run-cpu-bvh-wide).
+count: 12 ms for the 69k-triangle bunny, 0.56 s for the 1.6M-triangle dragon on the 2-core
+CPU on a slow day (bench/results/run-cpu-bvh-wide8; 1.5x the four-wide collapse's time
+measured alongside).
 """
 import numpy as np
 from numba import njit
