@@ -323,6 +323,16 @@ def _leaf(o, d, wide, row, first, count, skip, t_best, tri_best, b1_best, b2_bes
 
 
 @device
+def _visit(o, inv_d, t_max, wide, wchild, row):
+    """One node's visit: (its children's entry distances, the node's number, the bit masks
+    of the leaves and of the inner children that the ray enters before t_max)."""
+    ts = slab8(wide, row, o[0], o[1], o[2], inv_d[0], inv_d[1], inv_d[2], t_max)
+    hit = entered(ts)
+    node = row // NODE_ROWS
+    return ts, node, hit & wchild[node, WCHILD_LEAVES], hit & wchild[node, WCHILD_INNER]
+
+
+@device
 def _push(stack, sp, row, t):
     stack[sp] = row
     stack[sp + 1] = float_bits(t)
@@ -341,11 +351,8 @@ def closest_hit_wide(o, d, t_max, skip, tri_v, wide, wchild, stack):
     row = 0
     sp = 0
     while True:
-        ts = slab8(wide, row, o[0], o[1], o[2], inv_d[0], inv_d[1], inv_d[2], t_best)
-        hit = entered(ts)
-        node = row // NODE_ROWS
+        ts, node, leaves, inner = _visit(o, inv_d, t_best, wide, wchild, row)
         # the leaves entered, in lane order, each while still in front
-        leaves = hit & wchild[node, WCHILD_LEAVES]
         while leaves != 0:
             k = lowest_bit(leaves)
             leaves &= leaves - 1
@@ -353,7 +360,6 @@ def closest_hit_wide(o, d, t_max, skip, tri_v, wide, wchild, stack):
                 t_best, tri_best, b1_best, b2_best = _leaf(
                     o, d, wide, wchild[node, WCHILD_INDEX + k], wchild[node, WCHILD_FIRST + k],
                     wchild[node, WCHILD_COUNT + k], skip, t_best, tri_best, b1_best, b2_best)
-        inner = hit & wchild[node, WCHILD_INNER]
         if inner != 0:
             k0 = lowest_bit(inner)
             inner &= inner - 1
@@ -422,10 +428,7 @@ def any_hit_wide(o, d, t_max, skip_a, skip_b, tri_v, wide, wchild, stack):
     row = 0
     sp = 0
     while True:
-        ts = slab8(wide, row, o[0], o[1], o[2], inv_d[0], inv_d[1], inv_d[2], t_max)
-        hit = entered(ts)
-        node = row // NODE_ROWS
-        leaves = hit & wchild[node, WCHILD_LEAVES]
+        ts, node, leaves, inner = _visit(o, inv_d, t_max, wide, wchild, row)
         while leaves != 0:
             k = lowest_bit(leaves)
             leaves &= leaves - 1
@@ -433,7 +436,6 @@ def any_hit_wide(o, d, t_max, skip_a, skip_b, tri_v, wide, wchild, stack):
                             wchild[node, WCHILD_FIRST + k], wchild[node, WCHILD_COUNT + k],
                             t_max, skip_a, skip_b):
                 return True
-        inner = hit & wchild[node, WCHILD_INNER]
         if inner != 0:                          # the lowest lane next, the others stacked
             row = wchild[node, WCHILD_INDEX + lowest_bit(inner)]
             inner &= inner - 1
