@@ -5,9 +5,8 @@ child of largest surface area by its own two children until it has eight (or onl
 are left), the usual collapse of a binary SAH tree into a BVH8 (Wald et al. 2008; Embree).
 Leaves keep their triangles (the scene's numbering is unchanged: shading reads the same
 arrays) and get them packed four to a row for the SIMD triangle test. Linear in the node
-count: 12 ms for the 69k-triangle bunny, 0.56 s for the 1.6M-triangle dragon on the 2-core
-CPU on a slow day (bench/results/run-cpu-bvh-wide8; 1.5x the four-wide collapse's time
-measured alongside).
+count: 7 ms for the 69k-triangle bunny, 0.32-0.36 s for the 1.6M-triangle dragon on the
+2-core CPU on a slow day (2026-11-28; the four-wide collapse took 0.34-0.45 s alongside).
 """
 import numpy as np
 from numba import njit
@@ -97,9 +96,11 @@ def _take_child(box, child, b, s, sub_first, sub_count, kid_box, kid_index, kid_
 def _collapse(box, child, merge):
     n = box.shape[0]
     sub_first, sub_count = _small_subtrees(child, merge)
-    wbox = np.full((n, NODE_ROWS * WIDE_ROW), np.nan, np.float32)
-    wchild = np.zeros((n, WCHILD_WIDTH), np.int32)
-    wchild[:, WCHILD_COUNT:WCHILD_COUNT + WIDTH] = -1
+    # (room for as many wide nodes as binary ones, but each row is filled only when its node
+    # is made: the wide tree has ~a fifth as many, and filling all rows cost most of the
+    # collapse's time on the 1.6M-triangle dragon)
+    wbox = np.empty((n, NODE_ROWS * WIDE_ROW), np.float32)
+    wchild = np.empty((n, WCHILD_WIDTH), np.int32)
     todo_bin = np.empty(n + 1, np.int64)      # (binary node, wide node, wide depth)
     todo_wide = np.empty(n + 1, np.int64)
     todo_depth = np.empty(n + 1, np.int64)
@@ -116,6 +117,9 @@ def _collapse(box, child, merge):
         n_todo -= 1
         b = todo_bin[n_todo]
         w = todo_wide[n_todo]
+        wbox[w, :] = np.nan
+        wchild[w, :] = 0
+        wchild[w, WCHILD_COUNT:WCHILD_COUNT + WIDTH] = -1
         d = todo_depth[n_todo]
         depth = max(depth, d)
         k = 0

@@ -16,7 +16,7 @@ from ..kernels.integrator import make_aov_pixel, make_deferred_pixel, make_rende
 def cpu_arrays(arrays, previous=None):
     """The CPU kernels' arrays: the scene's, with the eight-wide BVH (kernels.wide) in the
     ``bvh_box`` and ``bvh_child`` slots (same array types: the kernels' signature does not
-    change), collapsed from the binary tree in ~12 ms for the 69k-triangle bunny; all of them
+    change), collapsed from the binary tree in ~7 ms for the 69k-triangle bunny; all of them
     read-only views (``_cache.read_only``: the same kernel in a Ray worker, whose arrays are
     read-only). ``previous`` ((binary arrays, wide arrays) of an earlier call): reused when
     the geometry is the same arrays (an API re-render that changed a material or the
