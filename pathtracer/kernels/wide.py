@@ -130,9 +130,10 @@ def _vector_helpers(context, builder, n=LANES):
     return vn, splat, lanes
 
 
-def _row_loader(context, builder, aryty, ary_value, row_value, row_type, v4):
-    """load(k): the floats of vector type v4 (four or eight) at offset k from the start of row ``row`` of a C-contiguous
-    float32 array (offsets past the row run on into the next rows)."""
+def _row_loader(context, builder, aryty, ary_value, row_value, row_type, vty):
+    """load(k): the floats of vector type vty (four or eight lanes) at offset k from the
+    start of row ``row`` of a C-contiguous float32 array (offsets past the row run on into
+    the next rows)."""
     ary = context.make_array(aryty)(context, builder, ary_value)
     row = context.cast(builder, row_value, row_type, types.intp)
     start = cgutils.get_item_pointer(context, builder, aryty, ary,
@@ -140,12 +141,12 @@ def _row_loader(context, builder, aryty, ary_value, row_value, row_type, v4):
                                      wraparound=False)
 
     # (on the GPU 16-byte aligned: rows of 48 bytes from an allocation aligned to 256,
-    # offsets k of whole four-float vectors)
+    # offsets k of whole four- or eight-float vectors)
     align = vector_alignment(context)
 
     def load(k):
         ptr = builder.gep(start, [context.get_constant(types.intp, k)])
-        return builder.load(builder.bitcast(ptr, v4.as_pointer()), align=align)
+        return builder.load(builder.bitcast(ptr, vty.as_pointer()), align=align)
     return load
 
 
@@ -295,8 +296,6 @@ overload(triangles4, strict=False)(
     lambda wide, row, ox, oy, oz, dx, dy, dz, t_max, skip_a, skip_b:
     (lambda wide, row, ox, oy, oz, dx, dy, dz, t_max, skip_a, skip_b:
      _triangles4_ir(wide, row, ox, oy, oz, dx, dy, dz, t_max, skip_a, skip_b)))
-
-
 
 
 # ---- traversal ----------------------------------------------------------------------------
