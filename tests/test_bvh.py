@@ -307,6 +307,10 @@ def test_fast_builder_makes_the_plain_builders_tree(rng, split):
     sliver = rng.random((PARALLEL_MIN + 3000, 3, 3)).astype(np.float32)
     sliver[:2000] *= np.float32([100.0, 0.001, 100.0])
     meshes.append(sliver)
+    # a plane (one axis without extent: its bins are never read) and a mesh of one point
+    plane = rng.random((3000, 3, 3)).astype(np.float32)
+    plane[:, :, 2] = 0.5
+    meshes += [plane, np.zeros((40, 3, 3), np.float32)]
     for pos in meshes:
         plain = build_bvh(pos, split=split, _plain=True)
         # the thread count sets how much of the top is built before the parallel subtrees
@@ -315,6 +319,19 @@ def test_fast_builder_makes_the_plain_builders_tree(rng, split):
             assert fast.depth == plain.depth
             for a, b in zip(fast[:3], plain[:3]):
                 assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("n_bins", [2, 5, 63, 64])
+def test_fast_builder_makes_the_plain_builders_tree_for_any_bin_count(rng, n_bins):
+    """The builder's filled bins are bits of an int64: up to 64 bins, the plain tree; more
+    are refused."""
+    pos = (rng.random((4000, 1, 3)) + rng.normal(0, 0.02, (4000, 3, 3))).astype(np.float32)
+    plain = build_bvh(pos, n_bins=n_bins, _plain=True)
+    fast = build_bvh(pos, n_bins=n_bins)
+    for a, b in zip(fast[:3], plain[:3]):
+        assert np.array_equal(a, b)
+    with pytest.raises(ValueError, match="n_bins"):
+        build_bvh(pos, n_bins=65)
 
 
 @njit(cache=True)

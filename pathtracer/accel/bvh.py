@@ -12,8 +12,10 @@ from typing import NamedTuple
 import numpy as np
 import numba
 from numba import njit, prange
+from numba.cpython.unsafe.numbers import leading_zeros, trailing_zeros
 
 from .._cache import jit_cache
+from .simd import HI, ROW, bin_indices, centres, copy_row, min_into, swap_rows
 from ..kernels.constants import STACK_SIZE
 from ..kernels.layout import (BOX_CHILD0, BOX_CHILD1, BOX_MAX, BOX_MIN, BOX_STRIDE, BOX_WIDTH,
                               CHILD0_COUNT, CHILD0_INDEX, CHILD1_COUNT, CHILD1_INDEX,
@@ -29,6 +31,7 @@ MAX_DEPTH = STACK_SIZE - 4  # deeper subtrees become leaves: the traversal stack
 PARALLEL_MIN = 1 << 16
 DEFER_MIN = 1 << 10
 DEFERRED = -7                # a child count marking a subtree built by another run
+MAX_BINS = 64                # a node's filled bins are bits of an int64 (_run)
 
 
 class BVH(NamedTuple):
@@ -48,15 +51,26 @@ def box_area(lo, hi):
 
 
 @njit(cache=jit_cache())
-def _centre(t_lo, t_hi, k, a):
-    """Triangle k's box centre on axis a, in float64: exact (half the sum of two float32
-    values), so it is computed where needed instead of stored and moved with the triangles."""
-    return 0.5 * (np.float64(t_lo[k, a]) + np.float64(t_hi[k, a]))
+def _row_centre(rows, k, a):
+    """The centre of triangle row k's box (accel.simd: lo and the negated hi) on axis a, in
+    float64: 0.5 * (lo + hi), exact (half the sum of two float32 values), so it is computed
+    where needed instead of stored and moved with the triangles."""
+    return 0.5 * (np.float64(rows[k, a]) - np.float64(rows[k, HI + a]))
 
 
 @njit(cache=jit_cache())
-def _range_bounds(t_lo, t_hi, start, end, lo, hi, clo, chi):
-    """Into lo/hi and clo/chi: the bounds of triangles start..end-1 and of their centres."""
+def _row_area(acc):
+    """box_area of the box in row 0 of acc (a bounds row: lo, then the negated hi)."""
+    dx = max(-np.float64(acc[0, HI]) - np.float64(acc[0, 0]), 0.0)
+    dy = max(-np.float64(acc[0, HI + 1]) - np.float64(acc[0, 1]), 0.0)
+    dz = max(-np.float64(acc[0, HI + 2]) - np.float64(acc[0, 2]), 0.0)
+    return 2.0 * (dx * dy + dy * dz + dz * dx)
+
+
+@njit(cache=jit_cache())
+def _rows_bounds(rows, start, end, lo, hi, clo, chi):
+    """Into lo/hi and clo/chi: the bounds of triangle rows start..end-1 and of their
+    centres."""
     for a in range(3):
         lo[a] = np.inf
         hi[a] = -np.inf
@@ -64,15 +78,15 @@ def _range_bounds(t_lo, t_hi, start, end, lo, hi, clo, chi):
         chi[a] = -np.inf
     for k in range(start, end):
         for a in range(3):
-            lo[a] = min(lo[a], t_lo[k, a])
-            hi[a] = max(hi[a], t_hi[k, a])
-            m = _centre(t_lo, t_hi, k, a)
+            lo[a] = min(lo[a], rows[k, a])
+            hi[a] = max(hi[a], -rows[k, HI + a])
+            m = _row_centre(rows, k, a)
             clo[a] = min(clo[a], m)
             chi[a] = max(chi[a], m)
 
 
 @njit(cache=jit_cache())
-def _run(t_lo, t_hi, order, tasks, task_box, n_tasks, box, child, n_bins, max_leaf,
+def _run(rows, order, tasks, task_box, n_tasks, box, child, n_bins, max_leaf,
          min_leaf_split, midpoint, defer, deferred, deferred_box):
     """The build loop over the task stack ``tasks`` (rows: start, end, parent node, side,
     depth, bounds known; ``task_box``: lo, hi, centroid lo, centroid hi) into the node
@@ -81,8 +95,8 @@ def _run(t_lo, t_hi, order, tasks, task_box, n_tasks, box, child, n_bins, max_le
     root is not built but appended to ``deferred`` (same row layout; its bounds in
     ``deferred_box``), its node box already written in its parent: another run builds it.
     Returns (nodes, depth, deferred count)."""
-    bin_lo = np.empty((3, n_bins, 3))
-    bin_hi = np.empty((3, n_bins, 3))
+    bins = np.empty((3 * n_bins, ROW), np.float32)    # axis a's bin b: row a * n_bins + b
+    acc = np.empty((1, ROW), np.float32)
     bin_n = np.empty((3, n_bins), np.int64)
     right_area = np.empty(n_bins)
     right_n = np.empty(n_bins, np.int64)
@@ -90,8 +104,6 @@ def _run(t_lo, t_hi, order, tasks, task_box, n_tasks, box, child, n_bins, max_le
     hi = np.empty(3)
     clo = np.empty(3)
     chi = np.empty(3)
-    acc_lo = np.empty(3)
-    acc_hi = np.empty(3)
     side_b = np.empty((2, 12))     # the children's bounds, as task_box rows
     n_nodes = 1
     n_deferred = 0
@@ -109,7 +121,7 @@ def _run(t_lo, t_hi, order, tasks, task_box, n_tasks, box, child, n_bins, max_le
                 count >= min_leaf_split and depth < MAX_DEPTH:
             # another run builds this subtree; its box goes into the parent now
             if not tasks[n_tasks, 5]:
-                _range_bounds(t_lo, t_hi, start, end, lo, hi, clo, chi)
+                _rows_bounds(rows, start, end, lo, hi, clo, chi)
                 for a in range(3):
                     task_box[n_tasks, a] = lo[a]
                     task_box[n_tasks, 3 + a] = hi[a]
@@ -135,7 +147,7 @@ def _run(t_lo, t_hi, order, tasks, task_box, n_tasks, box, child, n_bins, max_le
                 clo[a] = task_box[n_tasks, 6 + a]
                 chi[a] = task_box[n_tasks, 9 + a]
         else:
-            _range_bounds(t_lo, t_hi, start, end, lo, hi, clo, chi)
+            _rows_bounds(rows, start, end, lo, hi, clo, chi)
         # Find the best binned split.
         best_cost = np.inf
         best_axis = -1
@@ -144,78 +156,73 @@ def _run(t_lo, t_hi, order, tasks, task_box, n_tasks, box, child, n_bins, max_le
         binned = False
         if count >= min_leaf_split and depth < MAX_DEPTH:
             binned = True
-            # Only the counts are cleared: a bin's bounds are set by its first triangle and
-            # read only where its count is not zero (fewer stores on the many small nodes).
-            for a in range(3):
-                for b in range(n_bins):
-                    bin_n[a, b] = 0
+            # A bin is marked in its axis's bit mask when first filled (its bounds and count
+            # set then): nothing is cleared per node, and the sweeps visit only the filled
+            # bins, so a small node's work follows its triangles, not n_bins.
+            mask0 = 0
+            mask1 = 0
+            mask2 = 0
             inv0 = n_bins / (chi[0] - clo[0]) if chi[0] - clo[0] > 0.0 else 0.0
             inv1 = n_bins / (chi[1] - clo[1]) if chi[1] - clo[1] > 0.0 else 0.0
             inv2 = n_bins / (chi[2] - clo[2]) if chi[2] - clo[2] > 0.0 else 0.0
             for k in range(start, end):
-                x0 = t_lo[k, 0]
-                x1 = t_lo[k, 1]
-                x2 = t_lo[k, 2]
-                y0 = t_hi[k, 0]
-                y1 = t_hi[k, 1]
-                y2 = t_hi[k, 2]
+                # (an axis without extent, inv 0, fills bin 0: never read, see below)
+                b0, b1, b2 = bin_indices(rows, k, clo[0], clo[1], clo[2], inv0, inv1, inv2,
+                                         n_bins - 1)
                 for a in range(3):
-                    inv = inv0 if a == 0 else (inv1 if a == 1 else inv2)
-                    if inv > 0.0:
-                        b = min(int((_centre(t_lo, t_hi, k, a) - clo[a]) * inv), n_bins - 1)
-                        if bin_n[a, b] == 0:
-                            bin_lo[a, b, 0] = x0
-                            bin_lo[a, b, 1] = x1
-                            bin_lo[a, b, 2] = x2
-                            bin_hi[a, b, 0] = y0
-                            bin_hi[a, b, 1] = y1
-                            bin_hi[a, b, 2] = y2
+                    b = b0 if a == 0 else (b1 if a == 1 else b2)
+                    bit = np.int64(1) << b
+                    m = mask0 if a == 0 else (mask1 if a == 1 else mask2)
+                    if (m & bit) == 0:
+                        if a == 0:
+                            mask0 |= bit
+                        elif a == 1:
+                            mask1 |= bit
                         else:
-                            bin_lo[a, b, 0] = min(bin_lo[a, b, 0], x0)
-                            bin_lo[a, b, 1] = min(bin_lo[a, b, 1], x1)
-                            bin_lo[a, b, 2] = min(bin_lo[a, b, 2], x2)
-                            bin_hi[a, b, 0] = max(bin_hi[a, b, 0], y0)
-                            bin_hi[a, b, 1] = max(bin_hi[a, b, 1], y1)
-                            bin_hi[a, b, 2] = max(bin_hi[a, b, 2], y2)
+                            mask2 |= bit
+                        copy_row(bins, a * n_bins + b, rows, k)
+                        bin_n[a, b] = 1
+                    else:
+                        min_into(bins, a * n_bins + b, rows, k)
                         bin_n[a, b] += 1
             for a in range(3):
                 if chi[a] - clo[a] <= 0.0:
                     continue
-                # Suffix sweep: area and count right of each boundary.
-                for c in range(3):
-                    acc_lo[c] = np.inf
-                    acc_hi[c] = -np.inf
+                filled = mask0 if a == 0 else (mask1 if a == 1 else mask2)
+                # Suffix sweep over the filled bins, highest first: right_n[b] and
+                # right_area[b] of filled bin b are the count and area of the bins >= b.
+                for c in range(ROW):
+                    acc[0, c] = np.inf
                 acc_n = 0
-                right_a = 0.0
-                for b in range(n_bins - 1, 0, -1):
-                    if bin_n[a, b] > 0:
-                        acc_n += bin_n[a, b]
-                        for c in range(3):
-                            acc_lo[c] = min(acc_lo[c], bin_lo[a, b, c])
-                            acc_hi[c] = max(acc_hi[c], bin_hi[a, b, c])
-                        right_a = box_area(acc_lo, acc_hi)
+                m = filled
+                while m != 0:
+                    b = 63 - leading_zeros(m)
+                    m ^= np.int64(1) << b
+                    acc_n += bin_n[a, b]
+                    min_into(acc, 0, bins, a * n_bins + b)
                     right_n[b] = acc_n
-                    right_area[b] = right_a
-                # Prefix sweep; boundary b splits bins < b from bins >= b.
-                for c in range(3):
-                    acc_lo[c] = np.inf
-                    acc_hi[c] = -np.inf
+                    right_area[b] = _row_area(acc)
+                # Prefix sweep. Boundary c splits bins < c from bins >= c; between two
+                # filled bins b < b' every boundary b < c <= b' costs the same, and the
+                # first of them, b + 1, is the one a sweep over all boundaries keeps.
+                for c in range(ROW):
+                    acc[0, c] = np.inf
                 acc_n = 0
-                left_a = 0.0
-                for b in range(1, n_bins):
-                    if bin_n[a, b - 1] > 0:
-                        acc_n += bin_n[a, b - 1]
-                        for c in range(3):
-                            acc_lo[c] = min(acc_lo[c], bin_lo[a, b - 1, c])
-                            acc_hi[c] = max(acc_hi[c], bin_hi[a, b - 1, c])
-                        left_a = box_area(acc_lo, acc_hi)
-                    if acc_n == 0 or right_n[b] == 0:
-                        continue
-                    cost = acc_n * left_a + right_n[b] * right_area[b]
+                m = filled
+                while m != 0:
+                    b = trailing_zeros(m)
+                    m ^= np.int64(1) << b
+                    if m == 0:
+                        break
+                    acc_n += bin_n[a, b]
+                    min_into(acc, 0, bins, a * n_bins + b)
+                    left_a = _row_area(acc)
+                    nxt = trailing_zeros(m)
+                    cost = acc_n * left_a + right_n[nxt] * right_area[nxt]
                     if cost < best_cost:
                         best_cost = cost
                         best_axis = a
-                        best_bin = b
+                        best_bin = b + 1
         split_cost = np.inf
         if best_axis >= 0:
             split_cost = C_TRAVERSAL + C_INTERSECT * best_cost / max(parent_area, 1e-300)
@@ -231,8 +238,10 @@ def _run(t_lo, t_hi, order, tasks, task_box, n_tasks, box, child, n_bins, max_le
                 if chi[c] - clo[c] > chi[a] - clo[a]:
                     a = c
             left = 0
+            filled = mask0 if a == 0 else (mask1 if a == 1 else mask2)
             for b in range(n_bins // 2):
-                left += bin_n[a, b]
+                if (filled >> b) & 1:
+                    left += bin_n[a, b]
             if chi[a] - clo[a] > 0.0 and 0 < left < count:
                 best_axis = a
                 best_bin = n_bins // 2
@@ -246,44 +255,65 @@ def _run(t_lo, t_hi, order, tasks, task_box, n_tasks, box, child, n_bins, max_le
                 # triangle bounds from the bins.
                 a = best_axis
                 scale = n_bins / (chi[a] - clo[a])
+                # the children's centroid bounds in registers (in side_b each bound's load
+                # waited on its last store, every triangle)
+                l_lo0 = l_lo1 = l_lo2 = r_lo0 = r_lo1 = r_lo2 = np.inf
+                l_hi0 = l_hi1 = l_hi2 = r_hi0 = r_hi1 = r_hi2 = -np.inf
+                ca = clo[a]
+                last = n_bins - 1
+                i = start
+                j = end - 1
+                while i <= j:
+                    m0, m1, m2 = centres(rows, i)
+                    ma = m0 if a == 0 else (m1 if a == 1 else m2)
+                    b = min(int((ma - ca) * scale), last)
+                    if b < best_bin:
+                        l_lo0 = min(l_lo0, m0)
+                        l_lo1 = min(l_lo1, m1)
+                        l_lo2 = min(l_lo2, m2)
+                        l_hi0 = max(l_hi0, m0)
+                        l_hi1 = max(l_hi1, m1)
+                        l_hi2 = max(l_hi2, m2)
+                        i += 1
+                    else:
+                        r_lo0 = min(r_lo0, m0)
+                        r_lo1 = min(r_lo1, m1)
+                        r_lo2 = min(r_lo2, m2)
+                        r_hi0 = max(r_hi0, m0)
+                        r_hi1 = max(r_hi1, m1)
+                        r_hi2 = max(r_hi2, m2)
+                        tmp = order[i]
+                        order[i] = order[j]
+                        order[j] = tmp
+                        swap_rows(rows, i, j)
+                        j -= 1
                 for q in range(2):
                     for c in range(3):
                         side_b[q, c] = np.inf
                         side_b[q, 3 + c] = -np.inf
-                        side_b[q, 6 + c] = np.inf
-                        side_b[q, 9 + c] = -np.inf
-                i = start
-                j = end - 1
-                while i <= j:
-                    b = min(int((_centre(t_lo, t_hi, i, a) - clo[a]) * scale), n_bins - 1)
-                    q = 0 if b < best_bin else 1
-                    for c in range(3):
-                        m = _centre(t_lo, t_hi, i, c)
-                        side_b[q, 6 + c] = min(side_b[q, 6 + c], m)
-                        side_b[q, 9 + c] = max(side_b[q, 9 + c], m)
-                    if q == 0:
-                        i += 1
-                    else:
-                        tmp = order[i]
-                        order[i] = order[j]
-                        order[j] = tmp
-                        for c in range(3):
-                            f = t_lo[i, c]
-                            t_lo[i, c] = t_lo[j, c]
-                            t_lo[j, c] = f
-                            f = t_hi[i, c]
-                            t_hi[i, c] = t_hi[j, c]
-                            t_hi[j, c] = f
-                        j -= 1
+                side_b[0, 6] = l_lo0
+                side_b[0, 7] = l_lo1
+                side_b[0, 8] = l_lo2
+                side_b[0, 9] = l_hi0
+                side_b[0, 10] = l_hi1
+                side_b[0, 11] = l_hi2
+                side_b[1, 6] = r_lo0
+                side_b[1, 7] = r_lo1
+                side_b[1, 8] = r_lo2
+                side_b[1, 9] = r_hi0
+                side_b[1, 10] = r_hi1
+                side_b[1, 11] = r_hi2
                 mid = i
                 if binned:
+                    filled = mask0 if a == 0 else (mask1 if a == 1 else mask2)
                     for b in range(n_bins):
-                        if bin_n[a, b] == 0:
+                        if (filled >> b) & 1 == 0:
                             continue
                         q = 0 if b < best_bin else 1
                         for c in range(3):
-                            side_b[q, c] = min(side_b[q, c], bin_lo[a, b, c])
-                            side_b[q, 3 + c] = max(side_b[q, 3 + c], bin_hi[a, b, c])
+                            side_b[q, c] = min(side_b[q, c], bins[a * n_bins + b, c])
+                            side_b[q, 3 + c] = max(side_b[q, 3 + c],
+                                                   -bins[a * n_bins + b, HI + c])
                     known = 1
             else:
                 # All centroids coincide: no spatial split exists; halve the range so the
@@ -332,28 +362,27 @@ def _run(t_lo, t_hi, order, tasks, task_box, n_tasks, box, child, n_bins, max_le
 
 
 @njit(cache=jit_cache())
-def _build(tri_lo, tri_hi, n_bins, max_leaf, min_leaf_split, midpoint, threads):
+def _build(tri_rows, n_bins, max_leaf, min_leaf_split, midpoint, threads):
     """The tree, the triangle order, node count and depth. The per-triangle bounds
-    (scratch arrays, changed) are reordered along with ``order`` (the partitions swap
-    them; centres are computed from them where needed), so every pass reads them in
+    (``tri_rows``, rows of accel.simd; scratch, changed) are reordered along with
+    ``order`` (the partitions swap them; centres are computed from them where needed),
+    so every pass reads them in
     sequence; a node's bounds come with its task (from the parent's bins and partition),
     so each range is read twice (bin, partition), not three times. The top of the tree is
     built first, down to subtrees of at most 2/threads of the triangles, which are then
     built in parallel (_subtrees) and the nodes numbered as one sequential build numbers
     them (_assemble): the tree is exactly that of the plain formulation, _build_plain
     (tested), for any thread count."""
-    n = tri_lo.shape[0]
+    n = tri_rows.shape[0]
     order = np.arange(n).astype(np.int32)
     if n == 0:
         box = np.zeros((1, BOX_WIDTH), np.float32)
         child = np.full((1, CHILD_WIDTH), CHILD_EMPTY, np.int32)
         return box, child, order, 1, 0
-    # reordered in place: the caller's arrays are scratch (build_bvh makes them)
-    t_lo = tri_lo
-    t_hi = tri_hi
-    rows = 4 * STACK_SIZE + 8
-    tasks = np.zeros((rows, 6), np.int64)
-    task_box = np.zeros((rows, 12))
+    # reordered in place: the caller's array is scratch (build_bvh makes it)
+    n_rows = 4 * STACK_SIZE + 8
+    tasks = np.zeros((n_rows, 6), np.int64)
+    task_box = np.zeros((n_rows, 12))
     tasks[0, 1] = n
     tasks[0, 2] = -1
     box = np.zeros((max(1, n), BOX_WIDTH), np.float32)
@@ -364,7 +393,7 @@ def _build(tri_lo, tri_hi, n_bins, max_leaf, min_leaf_split, midpoint, threads):
     rows_def = max(threads, 1) * (MAX_DEPTH + 1) + 8
     deferred = np.zeros((rows_def, 6), np.int64)
     deferred_box = np.zeros((rows_def, 12))
-    n_top, depth, n_def = _run(t_lo, t_hi, order, tasks, task_box, 1, box, child,
+    n_top, depth, n_def = _run(tri_rows, order, tasks, task_box, 1, box, child,
                                n_bins, max_leaf, min_leaf_split, midpoint, defer, deferred,
                                deferred_box)
     if n_def == 0:
@@ -376,7 +405,7 @@ def _build(tri_lo, tri_hi, n_bins, max_leaf, min_leaf_split, midpoint, threads):
     sub_child = np.full((offsets[n_def], CHILD_WIDTH), CHILD_EMPTY, np.int32)
     sub_nodes = np.zeros(n_def, np.int64)
     sub_depth = np.zeros(n_def, np.int64)
-    _subtrees(t_lo, t_hi, order, deferred, deferred_box, n_def, offsets, sub_box,
+    _subtrees(tri_rows, order, deferred, deferred_box, n_def, offsets, sub_box,
               sub_child, sub_nodes, sub_depth, n_bins, max_leaf, min_leaf_split, midpoint)
     for k in range(n_def):
         depth = max(depth, sub_depth[k])
@@ -386,7 +415,7 @@ def _build(tri_lo, tri_hi, n_bins, max_leaf, min_leaf_split, midpoint, threads):
 
 
 @njit(parallel=True, cache=jit_cache())
-def _subtrees(t_lo, t_hi, order, deferred, deferred_box, n_def, offsets, sub_box,
+def _subtrees(tri_rows, order, deferred, deferred_box, n_def, offsets, sub_box,
               sub_child, sub_nodes, sub_depth, n_bins, max_leaf, min_leaf_split, midpoint):
     """Build each deferred subtree (disjoint triangle ranges) in parallel, subtree k into
     rows offsets[k]... of sub_box/sub_child with its own node numbering (its root: 0)."""
@@ -405,7 +434,7 @@ def _subtrees(t_lo, t_hi, order, deferred, deferred_box, n_def, offsets, sub_box
         none_box = np.zeros((1, 12))
         # (defer as an int64, not the literal 0: a literal argument would make Numba
         # compile a second _run for it, 7 s of the builder's ~20 s cold compile)
-        nodes, depth, _ = _run(t_lo, t_hi, order, tasks, task_box, 1, sub_box[lo:hi],
+        nodes, depth, _ = _run(tri_rows, order, tasks, task_box, 1, sub_box[lo:hi],
                                sub_child[lo:hi], n_bins, max_leaf, min_leaf_split,
                                midpoint, np.int64(0), none, none_box)
         sub_nodes[k] = nodes
@@ -676,17 +705,20 @@ def build_bvh(tri_verts, n_bins=16, max_leaf=8, split="sah", _plain=False, _thre
     tri_verts = np.ascontiguousarray(tri_verts, dtype=np.float32)
     if tri_verts.ndim != 3 or tri_verts.shape[1:] != (3, 3):
         raise ValueError(f"triangles must be N x 3 x 3, not {tri_verts.shape}")
-    tri_lo, tri_hi = _triangle_bounds(tri_verts)
+    if not 2 <= int(n_bins) <= MAX_BINS:
+        raise ValueError(f"n_bins must be 2 to {MAX_BINS}, not {n_bins}")
     min_leaf_split = len(tri_verts) + 1 if split == "none" else 2
     if _plain:
+        tri_lo, tri_hi = _triangle_bounds(tri_verts)
         centroid = 0.5 * (tri_lo.astype(np.float64) + tri_hi.astype(np.float64))
         box, child, order, _, depth = _build_plain(tri_lo, tri_hi, centroid, int(n_bins),
                                                    int(max_leaf), min_leaf_split,
                                                    split == "midpoint")
     else:
         threads = numba.get_num_threads() if _threads is None else int(_threads)
-        box, child, order, _, depth = _build(tri_lo, tri_hi, int(n_bins), int(max_leaf),
-                                             min_leaf_split, split == "midpoint", threads)
+        box, child, order, _, depth = _build(_triangle_rows(tri_verts), int(n_bins),
+                                             int(max_leaf), min_leaf_split,
+                                             split == "midpoint", threads)
     _widen(box)
     return BVH(box, child, order, int(depth))
 
@@ -708,6 +740,21 @@ def _triangle_bounds(tri_verts):
             lo[k, a] = low
             hi[k, a] = high
     return lo, hi
+
+
+@njit(parallel=True, cache=jit_cache())
+def _triangle_rows(tri_verts):
+    """Per-triangle bounds as the builder's rows (accel.simd): lo, 0, -hi, 0 (float32)."""
+    n = tri_verts.shape[0]
+    rows = np.zeros((n, ROW), np.float32)
+    for k in prange(n):
+        for a in range(3):
+            x0 = tri_verts[k, 0, a]
+            x1 = tri_verts[k, 1, a]
+            x2 = tri_verts[k, 2, a]
+            rows[k, a] = min(x0, min(x1, x2))
+            rows[k, HI + a] = -max(x0, max(x1, x2))
+    return rows
 
 
 @njit(parallel=True, cache=jit_cache())
