@@ -8,7 +8,8 @@ from numba import njit
 from pathtracer.kernels.layout import (D_BSDF_U, D_FIRST_BOUNCE, D_LIGHT_U, D_PIXEL_X,
                                        DIMS_PER_BOUNCE)
 from pathtracer.kernels.rng import (SOBOL_MATRIX, owen_scramble, pixel_key, reverse_bits,
-                                    make_sampler, sample_sobol, sobol_component,
+                                    make_pair_opener, make_sampler, sample_sobol,
+                                    sobol_component,
                                     sobol_digits, sobol_digits_table, sobol_set)
 from tests.helpers import GOLDEN_SOBOL, chi2_sf, golden_sobol_python_values
 
@@ -104,6 +105,35 @@ def test_the_cpu_sampler_draws_the_gpu_samplers_numbers():
         np.testing.assert_array_equal(gpu[key], cpu[key])
     for key, values in interpreted.items():
         np.testing.assert_array_equal(values, gpu[key])
+
+
+def test_a_bounce_opens_its_two_sets_at_once_with_the_same_numbers():
+    """make_pair_opener (the CPU opens a bounce's light and BSDF sets together, their hashes
+    and scrambles in shared vectors: rng.sobol_floats_pair) gives open_set's numbers for
+    both sets, compiled and interpreted, with and without the digit table."""
+    for sobol in (True, False):
+        for table in (False, True):
+            start_path, open_set, draw = make_sampler(sobol, table=table)
+            open_pair = make_pair_opener(sobol, table=table)
+
+            @njit
+            def numbers(pixel, sample, seed, dim):
+                state = start_path(pixel, sample, seed)
+                a, b = open_pair(state, dim)
+                out = np.zeros((2, 4), np.float32)
+                for c in range(4):
+                    out[0, c] = draw(state, a, dim + c)
+                    out[1, c] = draw(state, b, dim + 4 + c)
+                    out[0, c] -= draw(state, open_set(state, dim + c), dim + c)
+                    out[1, c] -= draw(state, open_set(state, dim + 4 + c), dim + 4 + c)
+                return out
+            for p in (0, 7, 4093, 2**31 + 11):
+                for s in (0, 1, 5, 255, 256, 1000, 70000, 2**31 + 5):
+                    for bounce in (0, 1, 5):
+                        dim = D_FIRST_BOUNCE + bounce * DIMS_PER_BOUNCE + D_LIGHT_U
+                        assert not numbers(p, s, 3, dim).any()
+            for s in (0, 256, 2**31 + 5):
+                assert not numbers.py_func(4093, s, 3, D_FIRST_BOUNCE + D_LIGHT_U).any()
 
 
 def test_owen_scramble_is_a_nested_permutation(rng):

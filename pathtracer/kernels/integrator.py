@@ -41,7 +41,7 @@ from .layout import (AOV_ALBEDO, AOV_NORMAL, CAM_CONE, D_BSDF_LOBE, D_BSDF_U, D_
                      P_ROUGHNESS, P_TRANSMISSION, STAT_BOUNCE_RAYS, STAT_NONFINITE,
                      STAT_SHADOW_RAYS, TRI_E1, TRI_E2, TRI_V0, Features, SceneArrays,
                      specialise)
-from .rng import make_sampler, udiv32
+from .rng import make_pair_opener, make_sampler, udiv32
 from .scatter import make_scatter
 from .surface import make_surface
 from .textures import NO_FOOTPRINT, cone_footprint
@@ -118,6 +118,19 @@ def make_kernels(features, target="cpu"):
     trace_closest = closest_hit_wide if WIDE else closest_hit
     trace_any = any_hit_wide if WIDE else any_hit
     start_path, open_set, draw = make_sampler(S.sobol, table=target == "cpu")
+    # The CPU's sobol sampler returns a set's four numbers when the set is opened
+    # (rng.make_sampler), so Russian roulette draws from the BSDF set the bounce opened
+    # (its dimension D_RR is that set's last); elsewhere it opens the set again, which
+    # keeps one tuple fewer alive across the BSDF sample on the GPU.
+    RR_FROM_BSDF_SET = target == "cpu"
+    # The CPU's sobol sampler opens a bounce's light and BSDF sets together (their hashes
+    # and scrambles in shared vectors, rng.sobol_floats_pair); elsewhere each is opened
+    # where it is drawn (on the GPU the BSDF set's state would live across the light
+    # sample). Compile-time switches: one of each pair of branches below is removed.
+    OPEN_PAIR = NEE and S.sobol and target == "cpu"
+    OPEN_LIGHT_SET = NEE and not OPEN_PAIR
+    OPEN_BSDF_SET = not OPEN_PAIR
+    open_pair = make_pair_opener(S.sobol, table=target == "cpu")
     surface = make_surface(features, target)
     scatter = make_scatter(features, target)
     emitters = make_emitters(features, target)
@@ -165,15 +178,17 @@ def make_kernels(features, target="cpu"):
         stats[py, px, STAT_NONFINITE] = n_bad
 
     @step
-    def russian_roulette(beta, bounce, rr_depth, state, dim):
+    def russian_roulette(beta, bounce, rr_depth, state, dim, bsdf_dims):
         """(beta, alive): after rr_depth bounces a path continues with probability
-        q = min(max beta, RR_MAX) and survivors are reweighted by 1/q (unbiased)."""
+        q = min(max beta, RR_MAX) and survivors are reweighted by 1/q (unbiased).
+        ``bsdf_dims``: the bounce's opened BSDF set (D_RR is in it)."""
         beta_max = max_comp(beta)
         if beta_max <= ZERO:
             return beta, False
         if bounce >= rr_depth:
             q = min(beta_max, RR_MAX)
-            if draw(state, open_set(state, dim + D_RR), dim + D_RR) >= q:
+            rr_dims = bsdf_dims if RR_FROM_BSDF_SET else open_set(state, dim + D_RR)
+            if draw(state, rr_dims, dim + D_RR) >= q:
                 return beta, False
             beta = scale(beta, ONE / q)
         return beta, True
@@ -267,12 +282,16 @@ def make_kernels(features, target="cpu"):
         ng_tri = ng
         ng = side_normal(ng, ns, wp)
         dim = D_FIRST_BOUNCE + bounce * DIMS_PER_BOUNCE
+        if OPEN_PAIR:
+            light_dims, dims = open_pair(state, dim + D_LIGHT_U)
         # ---- next-event estimation: one emitter sample, one shadow ray ----
         if NEE:
-            dims = open_set(state, dim + D_LIGHT_U)
+            if OPEN_LIGHT_SET:
+                light_dims = open_set(state, dim + D_LIGHT_U)
             wi, t_max, le, pdf_light, is_delta, light_tri = sample_emitter(
-                scene, p, origin, draw(state, dims, dim + D_LIGHT_SELECT),
-                draw(state, dims, dim + D_LIGHT_U), draw(state, dims, dim + D_LIGHT_V))
+                scene, p, origin, draw(state, light_dims, dim + D_LIGHT_SELECT),
+                draw(state, light_dims, dim + D_LIGHT_U),
+                draw(state, light_dims, dim + D_LIGHT_V))
             if pdf_light > ZERO:
                 contribution, traced = direct_light(
                     beta, is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, wp,
@@ -281,7 +300,8 @@ def make_kernels(features, target="cpu"):
                 radiance = add(radiance, contribution)
                 n_shadow_rays += traced
         # ---- BSDF sampling: the next ray ----
-        dims = open_set(state, dim + D_BSDF_U)
+        if OPEN_BSDF_SET:
+            dims = open_set(state, dim + D_BSDF_U)
         wi, weight, pdf_bsdf = sample_world(
             is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, wp,
             draw(state, dims, dim + D_BSDF_LOBE), draw(state, dims, dim + D_BSDF_U),
@@ -295,7 +315,7 @@ def make_kernels(features, target="cpu"):
         d = wi
         skip = own_skip(tri, ng_tri, ng, wi)
         bounce += 1
-        beta, alive = russian_roulette(beta, bounce, rr_depth, state, dim)
+        beta, alive = russian_roulette(beta, bounce, rr_depth, state, dim, dims)
         return (o, d, beta, radiance, pdf_prev, skip, bounce, cone, n_shadow_rays, 1,
                 alive)
 
@@ -421,12 +441,16 @@ def make_kernels(features, target="cpu"):
             ng_tri = ng
             ng = side_normal(ng, ns, wp)
             dim = D_FIRST_BOUNCE + bounce * DIMS_PER_BOUNCE
+            if OPEN_PAIR:
+                light_dims, dims = open_pair(state, dim + D_LIGHT_U)
             # ---- next-event estimation: one emitter sample, one shadow ray ----
             if NEE:
-                dims = open_set(state, dim + D_LIGHT_U)
+                if OPEN_LIGHT_SET:
+                    light_dims = open_set(state, dim + D_LIGHT_U)
                 wi, t_max, le, pdf_light, is_delta, light_tri = sample_emitter(
-                    scene, p, origin, draw(state, dims, dim + D_LIGHT_SELECT),
-                    draw(state, dims, dim + D_LIGHT_U), draw(state, dims, dim + D_LIGHT_V))
+                    scene, p, origin, draw(state, light_dims, dim + D_LIGHT_SELECT),
+                    draw(state, light_dims, dim + D_LIGHT_U),
+                    draw(state, light_dims, dim + D_LIGHT_V))
                 if pdf_light > ZERO:
                     contribution, traced = direct_light(
                         beta, is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, wp,
@@ -435,7 +459,8 @@ def make_kernels(features, target="cpu"):
                     radiance = add(radiance, contribution)
                     n_shadow_rays += traced
             # ---- BSDF sampling: the next ray ----
-            dims = open_set(state, dim + D_BSDF_U)
+            if OPEN_BSDF_SET:
+                dims = open_set(state, dim + D_BSDF_U)
             wi, weight, pdf_bsdf = sample_world(
                 is_principled, params, wo, wo_l, tangent, bitangent, ns, ng, wp,
                 draw(state, dims, dim + D_BSDF_LOBE), draw(state, dims, dim + D_BSDF_U),
@@ -449,7 +474,7 @@ def make_kernels(features, target="cpu"):
             skip = own_skip(tri, ng_tri, ng, wi)
             bounce += 1
             n_bounce_rays += 1
-            beta, alive = russian_roulette(beta, bounce, rr_depth, state, dim)
+            beta, alive = russian_roulette(beta, bounce, rr_depth, state, dim, dims)
             if not alive:
                 break
         return (radiance[0], radiance[1], radiance[2], n_bounce_rays, n_shadow_rays, out_ray,

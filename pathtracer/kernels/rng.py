@@ -25,7 +25,9 @@ the sobol sampler draws each set from the 4-D Sobol sequence with its own index 
 (Burley's padding): set 0 is the camera (pixel x, pixel y, lens u, lens v); every
 scattering event then has two sets, the light sample (position u, v, light pick) and the BSDF
 sample (direction u, v, reflection or refraction, Russian roulette: the principled BSDF picks
-its lobe by reusing u, ``principled.reuse_sample``).
+its lobe by reusing u, ``principled.reuse_sample``). The CPU opens a bounce's two sets
+together (``make_pair_opener``, ``sobol_floats_pair``): the same numbers, fewer vector
+operations.
 """
 import inspect
 
@@ -423,25 +425,38 @@ def _scramble4_ir(typingctx, x0, x1, x2, x3, seed):
     sig = types.UniTuple(types.float32, 4)(*args)
 
     def codegen(context, builder, signature, values):
-        b = builder
-        v32 = [b.trunc(v, _I32) if v.type.width > 32 else
-               (b.zext(v, _I32) if v.type.width < 32 else v) for v in values]
-        x = ir.Constant(_V4, ir.Undefined)
-        for k in range(4):
-            x = b.insert_element(x, v32[k], ir.Constant(_I32, k))
-        # per coordinate c the seed pcg_hash(seed + (c + 1) * _DIM_MUL), as sobol_component
-        seeds = b.insert_element(ir.Constant(_V4, ir.Undefined), v32[4], _c(0))
-        seeds = b.shuffle_vector(seeds, ir.Constant(_V4, ir.Undefined), _c(0, x))
-        seeds = b.add(seeds, ir.Constant(_V4, [_c(((k + 1) * int(_DIM_MUL)) & 0xFFFFFFFF)
-                                               for k in range(4)]))
-        # the scalar forms' own IR (_pcg_ir, _lk_ir, _brev_ir) on the four lanes
-        x = _brev_ir(b, _lk_ir(b, x, _pcg_ir(b, seeds)))
-        f = b.uitofp(b.lshr(x, _c(8, x)), ir.VectorType(ir.FloatType(), 4))
-        f = b.fmul(f, ir.Constant(ir.VectorType(ir.FloatType(), 4),
-                                  [ir.Constant(ir.FloatType(), float(_TO_UNIT))] * 4))
-        out = [b.extract_element(f, ir.Constant(_I32, k)) for k in range(4)]
-        return context.make_tuple(b, signature.return_type, out)
+        return context.make_tuple(builder, signature.return_type,
+                                  _scramble_sets_ir(builder, values))
     return sig, codegen
+
+
+def _to_i32(b, v):
+    return b.trunc(v, _I32) if v.type.width > 32 else (
+        b.zext(v, _I32) if v.type.width < 32 else v)
+
+
+def _scramble_sets_ir(b, values):
+    """The float32 of whole Sobol sets, scrambled in one vector: ``values`` holds, per set,
+    its four coordinates and its seed (x0, x1, x2, x3, seed, x0, ...); lane 4j + c is
+    sobol_component of set j's coordinate c."""
+    v32 = [_to_i32(b, v) for v in values]
+    n = 4 * (len(v32) // 5)
+    vec = ir.VectorType(_I32, n)
+    x = ir.Constant(vec, ir.Undefined)
+    seeds = ir.Constant(vec, ir.Undefined)
+    for j in range(n // 4):
+        for c in range(4):
+            x = b.insert_element(x, v32[5 * j + c], ir.Constant(_I32, 4 * j + c))
+            seeds = b.insert_element(seeds, v32[5 * j + 4], ir.Constant(_I32, 4 * j + c))
+    # per coordinate c the seed pcg_hash(seed + (c + 1) * _DIM_MUL), as sobol_component
+    seeds = b.add(seeds, ir.Constant(vec, [_c(((k % 4 + 1) * int(_DIM_MUL)) & 0xFFFFFFFF)
+                                           for k in range(n)]))
+    # the scalar forms' own IR (_pcg_ir, _lk_ir, _brev_ir) on the lanes
+    x = _brev_ir(b, _lk_ir(b, x, _pcg_ir(b, seeds)))
+    fvec = ir.VectorType(ir.FloatType(), n)
+    f = b.uitofp(b.lshr(x, _c(8, x)), fvec)
+    f = b.fmul(f, ir.Constant(fvec, [ir.Constant(ir.FloatType(), float(_TO_UNIT))] * n))
+    return [b.extract_element(f, ir.Constant(_I32, k)) for k in range(n)]
 
 
 overload(_scramble4_py, strict=False)(
@@ -460,6 +475,83 @@ def sobol_floats_table(pix, index_reversed, dset):
     (docs/benchmarks.md, 2026-11-28)."""
     u, x1, x2, x3, seed = sobol_set_table(pix, index_reversed, dset)
     return scramble4(u, x1, x2, x3, seed)
+
+
+def _shuffled_pair_py(pix, index_reversed, dset):
+    """shuffled_index of sets dset and dset + 1: (u, seed, u', seed')."""
+    u0, s0 = shuffled_index(pix, index_reversed, dset)
+    u1, s1 = shuffled_index(pix, index_reversed, dset + 1)
+    return u0, s0, u1, s1
+
+
+@intrinsic
+def _shuffled_pair_ir(typingctx, pix, index_reversed, dset):
+    """_shuffled_pair_py with the two sets' seeds hashed in one vector and their four index
+    scrambles (the index's and index 0's, shuffled_index) in another."""
+    if not all(isinstance(a, types.Integer) for a in (pix, index_reversed, dset)):
+        return None
+    sig = types.UniTuple(types.uint64, 4)(pix, index_reversed, dset)
+
+    def codegen(context, builder, signature, values):
+        b = builder
+        pix32, index32, dset32 = [_to_i32(b, v) for v in values]
+        keys = []
+        for j in (1, 2):                  # pix + (dset + j) * _SET_MUL, as shuffled_index
+            key = b.add(pix32, b.mul(b.add(dset32, _c(j)), _c(_SET_MUL)))
+            keys += [key, key]
+        key = ir.Constant(_V4, ir.Undefined)
+        x = ir.Constant(_V4, ir.Undefined)
+        for k in range(4):
+            key = b.insert_element(key, keys[k], ir.Constant(_I32, k))
+            x = b.insert_element(x, index32 if k % 2 == 0 else _c(0), ir.Constant(_I32, k))
+        seeds = _pcg_ir(b, key)
+        lk = _lk_ir(b, x, seeds)
+        lane = [b.extract_element(lk, ir.Constant(_I32, k)) for k in range(4)]
+        seed = [b.extract_element(seeds, ir.Constant(_I32, k)) for k in (0, 2)]
+        u = [_brev_ir(b, b.xor(lane[2 * j], lane[2 * j + 1])) for j in range(2)]
+        out = [b.zext(v, _I64) for v in (u[0], seed[0], u[1], seed[1])]
+        return context.make_tuple(b, signature.return_type, out)
+    return sig, codegen
+
+
+overload(_shuffled_pair_py, strict=False)(
+    lambda pix, index_reversed, dset: (lambda pix, index_reversed, dset:
+                                       _shuffled_pair_ir(pix, index_reversed, dset)))
+
+
+def _scramble8_py(x0, x1, x2, x3, seed, y0, y1, y2, y3, seed_y):
+    """scramble4 of two sets: eight float32."""
+    return scramble4(x0, x1, x2, x3, seed) + scramble4(y0, y1, y2, y3, seed_y)
+
+
+@intrinsic
+def _scramble8_ir(typingctx, x0, x1, x2, x3, seed, y0, y1, y2, y3, seed_y):
+    args = (x0, x1, x2, x3, seed, y0, y1, y2, y3, seed_y)
+    if not all(isinstance(a, types.Integer) for a in args):
+        return None
+    sig = types.UniTuple(types.float32, 8)(*args)
+
+    def codegen(context, builder, signature, values):
+        return context.make_tuple(builder, signature.return_type,
+                                  _scramble_sets_ir(builder, values))
+    return sig, codegen
+
+
+overload(_scramble8_py, strict=False)(
+    lambda x0, x1, x2, x3, seed, y0, y1, y2, y3, seed_y:
+    (lambda x0, x1, x2, x3, seed, y0, y1, y2, y3, seed_y:
+     _scramble8_ir(x0, x1, x2, x3, seed, y0, y1, y2, y3, seed_y)))
+
+
+@device
+def sobol_floats_pair(pix, index_reversed, dset):
+    """sobol_floats_table of sets dset and dset + 1 (eight float32), the two sets' hashes
+    and scrambles in shared vectors: the CPU's form for a bounce's light and BSDF sets
+    (layout.DIMS_PER_BOUNCE: two sets), which a bounce opens together."""
+    u0, s0, u1, s1 = _shuffled_pair_py(pix, index_reversed, dset)
+    a1, a2, a3 = sobol_digits_table(u0)
+    b1, b2, b3 = sobol_digits_table(u1)
+    return _scramble8_py(u0, a1, a2, a3, s0, u1, b1, b2, b3, s1)
 
 
 def make_sampler(sobol, table=False):
@@ -507,3 +599,21 @@ def make_sampler(sobol, table=False):
         return sample_1d(state[0], dim)
 
     return start_path, open_set, draw
+
+
+def make_pair_opener(sobol, table=False):
+    """``open_pair(state, dim)``: (open_set(state, dim), open_set(state, dim + 4)) of
+    make_sampler(sobol, table), two consecutive sets at once: for the CPU's sobol sampler
+    (``table``) one sobol_floats_pair, whose two sets share their vectors (a bounce's light
+    and BSDF sets), the same numbers."""
+    _, open_set, _ = make_sampler(sobol, table)
+    PAIRED = bool(sobol) and bool(table)
+
+    @device
+    def open_pair(state, dim):
+        if PAIRED:
+            f = sobol_floats_pair(state[1], state[2], dim >> 2)
+            return (f[0], f[1], f[2], f[3]), (f[4], f[5], f[6], f[7])
+        return open_set(state, dim), open_set(state, dim + 4)
+
+    return open_pair
