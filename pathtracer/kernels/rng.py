@@ -448,6 +448,14 @@ def _scramble_sets_ir(b, values):
         for c in range(4):
             x = b.insert_element(x, v32[5 * j + c], ir.Constant(_I32, 4 * j + c))
             seeds = b.insert_element(seeds, v32[5 * j + 4], ir.Constant(_I32, 4 * j + c))
+    return _scramble_ir(b, x, seeds)
+
+
+def _scramble_ir(b, x, seeds):
+    """The float32 lanes of Sobol coordinates x (a vector of i32, four per set) with their
+    sets' seeds (each lane its set's seed)."""
+    vec = x.type
+    n = vec.count
     # per coordinate c the seed pcg_hash(seed + (c + 1) * _DIM_MUL), as sobol_component
     seeds = b.add(seeds, ir.Constant(vec, [_c(((k % 4 + 1) * int(_DIM_MUL)) & 0xFFFFFFFF)
                                            for k in range(n)]))
@@ -477,81 +485,76 @@ def sobol_floats_table(pix, index_reversed, dset):
     return scramble4(u, x1, x2, x3, seed)
 
 
-def _shuffled_pair_py(pix, index_reversed, dset):
-    """shuffled_index of sets dset and dset + 1: (u, seed, u', seed')."""
-    u0, s0 = shuffled_index(pix, index_reversed, dset)
-    u1, s1 = shuffled_index(pix, index_reversed, dset + 1)
-    return u0, s0, u1, s1
+def _sobol_pair_py(table, pix, index_reversed, dset):
+    """sobol_floats_table of sets dset and dset + 1: eight float32 (``table``: SOBOL_BYTES,
+    which the compiled form reads itself)."""
+    return (sobol_floats_table(pix, index_reversed, dset)
+            + sobol_floats_table(pix, index_reversed, dset + 1))
 
 
 @intrinsic
-def _shuffled_pair_ir(typingctx, pix, index_reversed, dset):
-    """_shuffled_pair_py with the two sets' seeds hashed in one vector and their four index
-    scrambles (the index's and index 0's, shuffled_index) in another."""
-    if not all(isinstance(a, types.Integer) for a in (pix, index_reversed, dset)):
+def _sobol_pair_ir(typingctx, table, pix, index_reversed, dset):
+    """_sobol_pair_py in one stream of vector IR: the two sets' seeds hashed in one
+    <4 x i32> (each twice), the four index scrambles of shuffled_index (the index's and
+    index 0's, per set) in one Laine-Karras permutation, each set's digits as the XOR of
+    four 16-byte table rows (one vector load per byte of the shuffled index: a byte of 0
+    reads row 0, zeros), and the eight coordinates scrambled in one <8 x i32>
+    (_scramble_sets_ir's arithmetic)."""
+    if not (isinstance(table, types.Array) and table.ndim == 3
+            and all(isinstance(a, types.Integer) for a in (pix, index_reversed, dset))):
         return None
-    sig = types.UniTuple(types.uint64, 4)(pix, index_reversed, dset)
+    sig = types.UniTuple(types.float32, 8)(table, pix, index_reversed, dset)
 
     def codegen(context, builder, signature, values):
         b = builder
-        pix32, index32, dset32 = [_to_i32(b, v) for v in values]
-        keys = []
-        for j in (1, 2):                  # pix + (dset + j) * _SET_MUL, as shuffled_index
-            key = b.add(pix32, b.mul(b.add(dset32, _c(j)), _c(_SET_MUL)))
-            keys += [key, key]
+        pix32, index32, dset32 = [_to_i32(b, v) for v in values[1:]]
+        lane = [ir.Constant(_I32, k) for k in range(8)]
         key = ir.Constant(_V4, ir.Undefined)
         x = ir.Constant(_V4, ir.Undefined)
-        for k in range(4):
-            key = b.insert_element(key, keys[k], ir.Constant(_I32, k))
-            x = b.insert_element(x, index32 if k % 2 == 0 else _c(0), ir.Constant(_I32, k))
-        seeds = _pcg_ir(b, key)
+        for k in range(4):              # pix + (dset + set + 1) * _SET_MUL, as shuffled_index
+            j = k // 2 + 1
+            key = b.insert_element(
+                key, b.add(pix32, b.mul(b.add(dset32, _c(j)), _c(_SET_MUL))), lane[k])
+            x = b.insert_element(x, index32 if k % 2 == 0 else _c(0), lane[k])
+        seeds = _pcg_ir(b, key)          # (seed, seed, seed', seed')
         lk = _lk_ir(b, x, seeds)
-        lane = [b.extract_element(lk, ir.Constant(_I32, k)) for k in range(4)]
-        seed = [b.extract_element(seeds, ir.Constant(_I32, k)) for k in (0, 2)]
-        u = [_brev_ir(b, b.xor(lane[2 * j], lane[2 * j + 1])) for j in range(2)]
-        out = [b.zext(v, _I64) for v in (u[0], seed[0], u[1], seed[1])]
-        return context.make_tuple(b, signature.return_type, out)
+        ary = context.make_array(signature.args[0])(context, b, values[0])
+        sets = []
+        for j in range(2):
+            u = _brev_ir(b, b.xor(b.extract_element(lk, lane[2 * j]),
+                                  b.extract_element(lk, lane[2 * j + 1])))
+            digits = None                # (x1, x2, x3, 0): sobol_digits_table
+            for k in range(4):
+                byte = b.and_(b.lshr(u, _c(8 * k)), _c(255))
+                ptr = cgutils.get_item_pointer(
+                    context, b, signature.args[0], ary,
+                    [context.get_constant(types.intp, k), b.zext(byte, _I64),
+                     context.get_constant(types.intp, 0)], wraparound=False)
+                row = b.load(b.bitcast(ptr, _V4.as_pointer()), align=4)
+                digits = row if digits is None else b.xor(digits, row)
+            splat = b.insert_element(ir.Constant(_V4, ir.Undefined), u, lane[0])
+            # (u, x1, x2, x3)
+            sets.append(b.shuffle_vector(digits, splat, ir.Constant(_V4, [4, 0, 1, 2])))
+        v8 = ir.VectorType(_I32, 8)
+        xs = b.shuffle_vector(sets[0], sets[1], ir.Constant(v8, list(range(8))))
+        seeds8 = b.shuffle_vector(seeds, ir.Constant(_V4, ir.Undefined),
+                                  ir.Constant(v8, [0, 0, 0, 0, 2, 2, 2, 2]))
+        return context.make_tuple(b, signature.return_type, _scramble_ir(b, xs, seeds8))
     return sig, codegen
 
 
-overload(_shuffled_pair_py, strict=False)(
-    lambda pix, index_reversed, dset: (lambda pix, index_reversed, dset:
-                                       _shuffled_pair_ir(pix, index_reversed, dset)))
-
-
-def _scramble8_py(x0, x1, x2, x3, seed, y0, y1, y2, y3, seed_y):
-    """scramble4 of two sets: eight float32."""
-    return scramble4(x0, x1, x2, x3, seed) + scramble4(y0, y1, y2, y3, seed_y)
-
-
-@intrinsic
-def _scramble8_ir(typingctx, x0, x1, x2, x3, seed, y0, y1, y2, y3, seed_y):
-    args = (x0, x1, x2, x3, seed, y0, y1, y2, y3, seed_y)
-    if not all(isinstance(a, types.Integer) for a in args):
-        return None
-    sig = types.UniTuple(types.float32, 8)(*args)
-
-    def codegen(context, builder, signature, values):
-        return context.make_tuple(builder, signature.return_type,
-                                  _scramble_sets_ir(builder, values))
-    return sig, codegen
-
-
-overload(_scramble8_py, strict=False)(
-    lambda x0, x1, x2, x3, seed, y0, y1, y2, y3, seed_y:
-    (lambda x0, x1, x2, x3, seed, y0, y1, y2, y3, seed_y:
-     _scramble8_ir(x0, x1, x2, x3, seed, y0, y1, y2, y3, seed_y)))
+overload(_sobol_pair_py, strict=False)(
+    lambda table, pix, index_reversed, dset: (lambda table, pix, index_reversed, dset:
+                                              _sobol_pair_ir(table, pix, index_reversed,
+                                                             dset)))
 
 
 @device
 def sobol_floats_pair(pix, index_reversed, dset):
-    """sobol_floats_table of sets dset and dset + 1 (eight float32), the two sets' hashes
-    and scrambles in shared vectors: the CPU's form for a bounce's light and BSDF sets
-    (layout.DIMS_PER_BOUNCE: two sets), which a bounce opens together."""
-    u0, s0, u1, s1 = _shuffled_pair_py(pix, index_reversed, dset)
-    a1, a2, a3 = sobol_digits_table(u0)
-    b1, b2, b3 = sobol_digits_table(u1)
-    return _scramble8_py(u0, a1, a2, a3, s0, u1, b1, b2, b3, s1)
+    """sobol_floats_table of sets dset and dset + 1 (eight float32), the two sets' hashes,
+    digits and scrambles in shared vectors: the CPU's form for a bounce's light and BSDF
+    sets (layout.DIMS_PER_BOUNCE: two sets), which a bounce opens together."""
+    return _sobol_pair_py(SOBOL_BYTES, pix, index_reversed, dset)
 
 
 def make_sampler(sobol, table=False):
