@@ -68,6 +68,19 @@ def _row_area(acc):
 
 
 @njit(cache=jit_cache())
+def _axis(a, x0, x1, x2):
+    """x_a of three per-axis values kept in locals (registers), not an array."""
+    return x0 if a == 0 else (x1 if a == 1 else x2)
+
+
+@njit(cache=jit_cache())
+def _grow(bounds, m0, m1, m2):
+    """(lo0, lo1, lo2, hi0, hi1, hi2) ``bounds`` grown to take in the point m."""
+    return (min(bounds[0], m0), min(bounds[1], m1), min(bounds[2], m2),
+            max(bounds[3], m0), max(bounds[4], m1), max(bounds[5], m2))
+
+
+@njit(cache=jit_cache())
 def _rows_bounds(rows, start, end, lo, hi, clo, chi):
     """Into lo/hi and clo/chi: the bounds of triangle rows start..end-1 and of their
     centres."""
@@ -170,9 +183,9 @@ def _run(rows, order, tasks, task_box, n_tasks, box, child, n_bins, max_leaf,
                 b0, b1, b2 = bin_indices(rows, k, clo[0], clo[1], clo[2], inv0, inv1, inv2,
                                          n_bins - 1)
                 for a in range(3):
-                    b = b0 if a == 0 else (b1 if a == 1 else b2)
+                    b = _axis(a, b0, b1, b2)
                     bit = np.int64(1) << b
-                    m = mask0 if a == 0 else (mask1 if a == 1 else mask2)
+                    m = _axis(a, mask0, mask1, mask2)
                     if (m & bit) == 0:
                         if a == 0:
                             mask0 |= bit
@@ -188,7 +201,7 @@ def _run(rows, order, tasks, task_box, n_tasks, box, child, n_bins, max_leaf,
             for a in range(3):
                 if chi[a] - clo[a] <= 0.0:
                     continue
-                filled = mask0 if a == 0 else (mask1 if a == 1 else mask2)
+                filled = _axis(a, mask0, mask1, mask2)
                 # Suffix sweep over the filled bins, highest first: right_n[b] and
                 # right_area[b] of filled bin b are the count and area of the bins >= b.
                 for c in range(ROW):
@@ -238,7 +251,7 @@ def _run(rows, order, tasks, task_box, n_tasks, box, child, n_bins, max_leaf,
                 if chi[c] - clo[c] > chi[a] - clo[a]:
                     a = c
             left = 0
-            filled = mask0 if a == 0 else (mask1 if a == 1 else mask2)
+            filled = _axis(a, mask0, mask1, mask2)
             for b in range(n_bins // 2):
                 if (filled >> b) & 1:
                     left += bin_n[a, b]
@@ -257,31 +270,21 @@ def _run(rows, order, tasks, task_box, n_tasks, box, child, n_bins, max_leaf,
                 scale = n_bins / (chi[a] - clo[a])
                 # the children's centroid bounds in registers (in side_b each bound's load
                 # waited on its last store, every triangle)
-                l_lo0 = l_lo1 = l_lo2 = r_lo0 = r_lo1 = r_lo2 = np.inf
-                l_hi0 = l_hi1 = l_hi2 = r_hi0 = r_hi1 = r_hi2 = -np.inf
+                left_c = (np.inf, np.inf, np.inf, -np.inf, -np.inf, -np.inf)
+                right_c = left_c
                 ca = clo[a]
                 last = n_bins - 1
                 i = start
                 j = end - 1
                 while i <= j:
                     m0, m1, m2 = centres(rows, i)
-                    ma = m0 if a == 0 else (m1 if a == 1 else m2)
+                    ma = _axis(a, m0, m1, m2)
                     b = min(int((ma - ca) * scale), last)
                     if b < best_bin:
-                        l_lo0 = min(l_lo0, m0)
-                        l_lo1 = min(l_lo1, m1)
-                        l_lo2 = min(l_lo2, m2)
-                        l_hi0 = max(l_hi0, m0)
-                        l_hi1 = max(l_hi1, m1)
-                        l_hi2 = max(l_hi2, m2)
+                        left_c = _grow(left_c, m0, m1, m2)
                         i += 1
                     else:
-                        r_lo0 = min(r_lo0, m0)
-                        r_lo1 = min(r_lo1, m1)
-                        r_lo2 = min(r_lo2, m2)
-                        r_hi0 = max(r_hi0, m0)
-                        r_hi1 = max(r_hi1, m1)
-                        r_hi2 = max(r_hi2, m2)
+                        right_c = _grow(right_c, m0, m1, m2)
                         tmp = order[i]
                         order[i] = order[j]
                         order[j] = tmp
@@ -291,21 +294,12 @@ def _run(rows, order, tasks, task_box, n_tasks, box, child, n_bins, max_leaf,
                     for c in range(3):
                         side_b[q, c] = np.inf
                         side_b[q, 3 + c] = -np.inf
-                side_b[0, 6] = l_lo0
-                side_b[0, 7] = l_lo1
-                side_b[0, 8] = l_lo2
-                side_b[0, 9] = l_hi0
-                side_b[0, 10] = l_hi1
-                side_b[0, 11] = l_hi2
-                side_b[1, 6] = r_lo0
-                side_b[1, 7] = r_lo1
-                side_b[1, 8] = r_lo2
-                side_b[1, 9] = r_hi0
-                side_b[1, 10] = r_hi1
-                side_b[1, 11] = r_hi2
+                for c in range(6):
+                    side_b[0, 6 + c] = left_c[c]
+                    side_b[1, 6 + c] = right_c[c]
                 mid = i
                 if binned:
-                    filled = mask0 if a == 0 else (mask1 if a == 1 else mask2)
+                    filled = _axis(a, mask0, mask1, mask2)
                     for b in range(n_bins):
                         if (filled >> b) & 1 == 0:
                             continue
@@ -366,13 +360,12 @@ def _build(tri_rows, n_bins, max_leaf, min_leaf_split, midpoint, threads):
     """The tree, the triangle order, node count and depth. The per-triangle bounds
     (``tri_rows``, rows of accel.simd; scratch, changed) are reordered along with
     ``order`` (the partitions swap them; centres are computed from them where needed),
-    so every pass reads them in
-    sequence; a node's bounds come with its task (from the parent's bins and partition),
-    so each range is read twice (bin, partition), not three times. The top of the tree is
-    built first, down to subtrees of at most 2/threads of the triangles, which are then
-    built in parallel (_subtrees) and the nodes numbered as one sequential build numbers
-    them (_assemble): the tree is exactly that of the plain formulation, _build_plain
-    (tested), for any thread count."""
+    so every pass reads them in sequence; a node's bounds come with its task (from the
+    parent's bins and partition), so each range is read twice (bin, partition), not three
+    times. The top of the tree is built first, down to subtrees of at most 2/threads of
+    the triangles, which are then built in parallel (_subtrees) and the nodes numbered as
+    one sequential build numbers them (_assemble): the tree is exactly that of the plain
+    formulation, _build_plain (tested), for any thread count."""
     n = tri_rows.shape[0]
     order = np.arange(n).astype(np.int32)
     if n == 0:

@@ -500,7 +500,9 @@ def _sobol_pair_ir(typingctx, table, pix, index_reversed, dset):
     four 16-byte table rows (one vector load per byte of the shuffled index: a byte of 0
     reads row 0, zeros), and the eight coordinates scrambled in one <8 x i32>
     (_scramble_sets_ir's arithmetic)."""
-    if not (isinstance(table, types.Array) and table.ndim == 3
+    # (the table: SOBOL_BYTES, C-contiguous uint32 rows of four: one 16-byte load each)
+    if not (isinstance(table, types.Array) and table.ndim == 3 and table.layout == "C"
+            and table.dtype == types.uint32
             and all(isinstance(a, types.Integer) for a in (pix, index_reversed, dset))):
         return None
     sig = types.UniTuple(types.float32, 8)(table, pix, index_reversed, dset)
@@ -605,7 +607,7 @@ def make_sampler(sobol, table=False):
 
 
 def make_pair_opener(sobol, table=False):
-    """``open_pair(state, dim)``: (open_set(state, dim), open_set(state, dim + 4)) of
+    """``open_pair(state, dim)``: (open_set(state, dim), open_set(state, dim + SOBOL_DIMS)) of
     make_sampler(sobol, table), two consecutive sets at once: for the CPU's sobol sampler
     (``table``) one sobol_floats_pair, whose two sets share their vectors (a bounce's light
     and BSDF sets), the same numbers."""
@@ -617,6 +619,6 @@ def make_pair_opener(sobol, table=False):
         if PAIRED:
             f = sobol_floats_pair(state[1], state[2], dim >> 2)
             return (f[0], f[1], f[2], f[3]), (f[4], f[5], f[6], f[7])
-        return open_set(state, dim), open_set(state, dim + 4)
+        return open_set(state, dim), open_set(state, dim + SOBOL_DIMS)
 
     return open_pair
