@@ -14,7 +14,7 @@ from pathtracer.kernels.rng import path_key, sample_1d
 from pathtracer.scene import load_scene
 from pathtracer.kernels.constants import LUM_B, LUM_G, LUM_R
 from pathtracer.kernels.layout import ENV_DENSITY, ENV_TEXEL_WIDTH
-from pathtracer.kernels.envmap import environment_tables
+from pathtracer.kernels.envmap import environment_tables, guide_size, guide_table
 from pathtracer.scene.images import read_image
 from pathtracer.film import write_image
 from tests.conftest import BACKENDS, SHARED, needs_shared
@@ -29,12 +29,12 @@ def info(rotation_deg=0.0):
 
 
 @njit(cache=True)
-def _hist(marg, cond, texels, inf, n, n_t, n_p):
+def _hist(marg, cond, guide, texels, inf, n, n_t, n_p):
     h = np.zeros((n_t, n_p))
     bad = 0
     for i in range(n):
         k = path_key(i, 3, 77)
-        d, p = env_sample(marg, cond, texels, inf, sample_1d(k, 0), sample_1d(k, 1))
+        d, p = env_sample(marg, cond, guide, texels, inf, sample_1d(k, 0), sample_1d(k, 1))
         if p <= 0:
             continue
         p2 = env_pdf(texels, inf, d)
@@ -68,9 +68,9 @@ def _integral(texels, inf, n_t, n_p, sub):
 
 
 def _check_sampling(img, rotation, n=400_000, n_t=32, n_p=64, sub=6, compensate=True):
-    texels, marg, cond = environment_tables(img, compensate)
+    texels, marg, cond, guide = environment_tables(img, compensate)
     inf = info(rotation)
-    h, bad = _hist(marg, cond, texels, inf, n, n_t, n_p)
+    h, bad = _hist(marg, cond, guide, texels, inf, n, n_t, n_p)
     # the direction -> (u, v) round trip may land in the neighbouring cell by rounding
     assert bad <= n * 1e-4, "env_pdf disagrees with env_sample's pdf"
     integ = _integral(texels, inf, n_t, n_p, sub)
@@ -210,14 +210,14 @@ def test_sampling_density_follows_the_bilinear_radiance():
     at the sun's bilinear skirt. With compensation the density follows the excess over the
     sky's mean instead (test_compensated_density_is_the_excess_over_the_mean)."""
     img, _ = read_image(os.path.join(SHARED, "assets", "hdri", "rooitou_park_1k.hdr"))
-    texels, marg, cond = environment_tables(img, compensate=False)
+    texels, _, _, _ = environment_tables(img, compensate=False)
     q = _radiance_over_pdf(texels, info(-75.0), 2_000_000)
     assert len(q) > 1_000_000
     assert q.max() / q.min() < 1.03, q.max() / q.min()
 
 
 @njit(cache=True)
-def _lookups(texels, marg, cond, inf, n):
+def _lookups(texels, marg, cond, guide, inf, n):
     """For n sampled directions: |the radiance env_sample_lit gives - env_eval(d)| over
     the radiance, and whether env_lookup gave env_eval's and env_pdf's numbers exactly
     (with and without the pdf)."""
@@ -225,7 +225,7 @@ def _lookups(texels, marg, cond, inf, n):
     same = 0
     for i in range(n):
         k = path_key(i, 5, 91)
-        d, p, b, u, v = env_sample_lit(marg, cond, texels, inf, sample_1d(k, 0),
+        d, p, b, u, v = env_sample_lit(marg, cond, guide, texels, inf, sample_1d(k, 0),
                                        sample_1d(k, 1))
         a = env_eval(texels, inf, d)
         rel[i] = max(abs(a[0] - b[0]), abs(a[1] - b[1]), abs(a[2] - b[2])) / max(
@@ -245,9 +245,9 @@ def test_lookups_at_the_sampled_coordinates():
     sampled direction up to the direction's round trip's rounding, the latter gives
     env_eval's and env_pdf's numbers exactly."""
     img, _ = read_image(os.path.join(SHARED, "assets", "hdri", "rooitou_park_1k.hdr"))
-    texels, marg, cond = environment_tables(img)
+    texels, marg, cond, guide = environment_tables(img)
     n = 200_000
-    rel, same = _lookups(texels, marg, cond, info(100.0), n)
+    rel, same = _lookups(texels, marg, cond, guide, info(100.0), n)
     assert same == n
     # (the direction's round trip through float32 sines and arctangents moves (u, v) by a
     # few 1e-5 of a texel: median 1.7e-5 here)
@@ -262,12 +262,13 @@ def test_sampled_radiance_is_the_blend_at_the_sampled_point():
     by the texels' differences, ~1)."""
     rng = np.random.default_rng(0)
     h, w = 16, 32
-    texels, marg, cond = environment_tables(rng.random((h, w, 3)).astype(np.float32) * 10)
+    texels, marg, cond, guide = environment_tables(
+        rng.random((h, w, 3)).astype(np.float32) * 10)
     worst = 0.0
     for i in range(2000):
         k = path_key(i, 5, 91)
-        _, p, le, u, v = env_sample_lit(marg, cond, texels, info(30.0), sample_1d(k, 0),
-                                        sample_1d(k, 1))
+        _, p, le, u, v = env_sample_lit(marg, cond, guide, texels, info(30.0),
+                                        sample_1d(k, 0), sample_1d(k, 1))
         assert p > 0
         ref = radiance_in_cell(texels, *env_cell(w, h, u, v))
         worst = max(worst, max(abs(a - b) for a, b in zip(le, ref)) / max(ref))
@@ -311,6 +312,50 @@ def test_compensated_density_is_the_excess_over_the_mean():
     assert np.array_equal(environment_tables(flat)[0],
                           environment_tables(flat, compensate=False)[0])
     assert np.count_nonzero(environment_tables(flat)[0][..., ENV_DENSITY]) == 8 * 16
+
+
+@njit(cache=True)
+def _samples(marg, cond, guide, texels, inf, n):
+    """env_sample_lit's (u, v) and pdf for n stratified-random sample pairs."""
+    out = np.zeros((n, 3), np.float32)
+    for i in range(n):
+        k = path_key(i, 7, 13)
+        _, p, _, u, v = env_sample_lit(marg, cond, guide, texels, inf, sample_1d(k, 0),
+                                       sample_1d(k, 1))
+        out[i, 0] = u
+        out[i, 1] = v
+        out[i, 2] = p
+    return out
+
+
+@pytest.mark.parametrize("compensate", [True, False])
+def test_guided_search_finds_the_bisections_cells(compensate):
+    """The guide tables only shorten the searches: with them env_sample_lit gives the
+    samples it gives with one-interval guides (a bracket of every cell, a plain search),
+    on a sky with a sun (rows and runs of columns without mass when compensated) and on
+    random texels of an odd-sized map; and every guide entry is the last cell at or
+    below its quantile (guide_table)."""
+    rng = np.random.default_rng(5)
+    for img in (_sky_with_sun(), rng.random((13, 37, 3)).astype(np.float32) ** 4):
+        texels, marg, cond, guide = environment_tables(img, compensate)
+        h, w = img.shape[:2]
+        n_guide = guide.shape[1] - 1
+        assert n_guide == guide_size(w, h) > 1
+        for row, cum in [(j, cond[j]) for j in range(h)] + [(h, marg)]:
+            q = np.arange(n_guide + 1) / n_guide * np.float64(cum[-1])
+            for b, i in enumerate(guide[row]):
+                assert 0 <= i < len(cum) - 1
+                assert i == len(cum) - 2 or cum[i + 1] > q[b]
+                assert cum[i] <= q[b] or i == 0
+        plain = np.empty((h + 1, 2), np.int32)
+        for j in range(h):
+            plain[j] = guide_table(cond[j], 1)
+        plain[h] = guide_table(marg, 1)
+        inf = info(20.0)
+        n = 100_000
+        a = _samples(marg, cond, guide, texels, inf, n)
+        b = _samples(marg, cond, plain, texels, inf, n)
+        assert np.array_equal(a, b)
 
 
 def test_compensated_sampling_chi_square():

@@ -76,8 +76,9 @@ def make_emitters(features, target="cpu"):
     emitted = surface.emitted
 
     @step
-    def sample_environment(env_marg, env_cond, env_img, env_info, u1, u2):
-        wi, pdf_dir, le, _, _ = env_sample_lit(env_marg, env_cond, env_img, env_info, u1, u2)
+    def sample_environment(env_marg, env_cond, env_guide, env_img, env_info, u1, u2):
+        wi, pdf_dir, le, _, _ = env_sample_lit(env_marg, env_cond, env_guide, env_img,
+                                               env_info, u1, u2)
         if not (pdf_dir > ZERO):
             return wi, INF, NO_RADIANCE, ZERO, False, -1
         return wi, INF, le, env_info[ENV_P_SELECT] * pdf_dir, False, -1
@@ -127,8 +128,8 @@ def make_emitters(features, target="cpu"):
         if ENV_MAP:
             p_env = scene.env_info[ENV_P_SELECT]
             if u_sel < p_env:
-                return sample_environment(scene.env_marg, scene.env_cond, scene.env_img,
-                                          scene.env_info, u1, u2)
+                return sample_environment(scene.env_marg, scene.env_cond, scene.env_guide,
+                                          scene.env_img, scene.env_info, u1, u2)
             u_sel = min((u_sel - p_env) / (ONE - p_env), ONE_MINUS_EPS)
         if ANY_LIGHTS:
             if LIGHT_TREE:

@@ -419,6 +419,7 @@ class SceneArrays(NamedTuple):
     env_img: np.ndarray        # float32 (H, W, ENV_TEXEL_WIDTH) see kernels.envmap
     env_marg: np.ndarray       # float32 (H + 2,)
     env_cond: np.ndarray       # float32 (H, W + 1)
+    env_guide: np.ndarray      # int32 (H + 1, G + 1): the searches' guide tables
     env_info: np.ndarray       # float32 (ENV_INFO_SIZE,)
     lt_node: np.ndarray        # float32 (L, LT_WIDTH) (light tree only)
     lt_link: np.ndarray        # int32 (L, LT_LINK_WIDTH) (light tree only)

@@ -178,7 +178,7 @@ def compile_scene(desc, use_cache=True, bvh_options=None, memo=None):
         point_lights=lights.point_lights, env=env.color, bvh_box=tri.bvh.box,
         bvh_child=tri.bvh.child, tri_uv=tri.tri_uv, tri_t=tri.tri_t, mat_tex=mat_tex,
         tex_data=tex_data, tex_int=tex_int, tex_f=tex_f, env_img=env.img, env_marg=env.marg,
-        env_cond=env.cond, env_info=env.info, lt_node=lt_node,
+        env_cond=env.cond, env_guide=env.guide, env_info=env.info, lt_node=lt_node,
         lt_link=lt_link, tri_light_leaf=tri_light_leaf)
     w, h = desc.camera.resolution
     r = desc.render
@@ -704,6 +704,7 @@ class Environment(NamedTuple):
     img: np.ndarray        # texels: radiance and density (kernels.envmap)
     marg: np.ndarray
     cond: np.ndarray
+    guide: np.ndarray
     info: np.ndarray
     has_map: bool
     constant: bool         # a constant colour that is not black
@@ -717,6 +718,7 @@ def compile_environment(desc, has_lights, memo=None):
     img = np.zeros((1, 1, ENV_TEXEL_WIDTH), np.float32)
     marg = np.array([0.0, 1.0], np.float32)
     cond = np.array([[0.0, 1.0]], np.float32)
+    guide = np.zeros((2, 2), np.int32)
     info = np.zeros(ENV_INFO_SIZE, np.float32)
     info[ENV_COS_ROT] = 1.0
     has_map = False
@@ -726,7 +728,7 @@ def compile_environment(desc, has_lights, memo=None):
             ("environment", file_key(env_map.path), env_map.intensity, env_map.compensate),
             lambda: _environment_map_tables(env_map, desc.path))
         if got is not None:
-            img, marg, cond = got
+            img, marg, cond, guide = got
             has_map = True
             phi = math.radians(desc.environment.rotation)
             info[ENV_COS_ROT] = math.cos(phi)
@@ -736,7 +738,7 @@ def compile_environment(desc, has_lights, memo=None):
         color[:] = desc.environment
     constant = not has_map and desc.environment is not None and bool(color.any())
     p_lights = 1.0 - float(info[ENV_P_SELECT]) if has_map else 1.0
-    return Environment(color, img, marg, cond, info, has_map, constant, p_lights)
+    return Environment(color, img, marg, cond, guide, info, has_map, constant, p_lights)
 
 
 def _environment_map_tables(env, scene_file):
