@@ -5,6 +5,7 @@ import pytest
 from numba import njit
 
 from pathtracer.kernels.lights import sample_discrete, sample_triangle_point
+from pathtracer.kernels.search import last_at_most
 from pathtracer.kernels.materials import diffuse_eval_local, diffuse_sample_local
 from pathtracer.kernels.vec import frame, to_world
 from pathtracer.kernels.rng import path_key, sample_1d
@@ -125,6 +126,33 @@ def test_discrete_sampling_matches_pmf():
     chi2_test(counts, np.diff(cdf.astype(float)) * len(idx))
     assert sample_discrete(cdf, np.float32(0.0)) == 1
     assert sample_discrete(cdf, np.float32(np.nextafter(np.float32(1), np.float32(0)))) == 6
+
+
+@njit(cache=True)
+def _branch_free_picks(cdf, u):
+    out = np.empty(u.shape[0], np.int64)
+    for i in range(u.shape[0]):
+        out[i] = last_at_most(cdf, u[i])
+    return out
+
+
+def test_branch_free_search_is_the_bisection():
+    """The CPU's light pick (search.last_at_most, compiled with a cmov) gives
+    sample_discrete's index for every u: tables of 2 to 40 entries with runs of zero
+    probability, u at and between the entries (ties go to the last equal entry), and NaN
+    (index 0, as the bisection)."""
+    rng = np.random.default_rng(3)
+    for n in list(range(2, 12)) + [17, 40]:
+        w = rng.random(n - 1) * (rng.random(n - 1) < 0.6)
+        w[rng.integers(n - 1)] = 1.0
+        cdf = np.concatenate([[0.0], np.cumsum(w) / w.sum()]).astype(np.float32)
+        cdf[-1] = 1.0
+        u = np.concatenate([rng.random(500).astype(np.float32), cdf[:-1],
+                            np.nextafter(cdf[1:-1], np.float32(0)), [np.float32(np.nan)]])
+        want = np.array([sample_discrete(cdf, x) for x in u])
+        assert np.array_equal(_branch_free_picks(cdf, u), want)
+        assert np.array_equal([last_at_most(cdf, x) for x in u], want)    # interpreted
+    assert "cmov" in "".join(_branch_free_picks.inspect_asm().values())
 
 
 def test_power_heuristic_limits():

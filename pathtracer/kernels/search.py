@@ -1,20 +1,21 @@
-"""Searches of cumulative tables without a mispredicted branch per step.
+"""A search of a cumulative table without a mispredicted branch per step (the CPU's).
 
-Sampling a discrete or piecewise-linear distribution by inversion finds the last entry of
-a cumulative table that is <= u. A bisection branches on every comparison, and which way it
-goes is a coin flip: on the CPU about half of the steps mispredict (~13 cycles each on
-Zen 3). The environment map's sampling (a 513-entry marginal table, then a 1,024-column
-row) was 15 % of bunny-studio's CPU kernel time, most of it in its two bisections
-(``python -m bench.cpu_profile bunny-studio --calls env_sample_lit``, 2026-11-28).
+Sampling a discrete distribution by inversion finds the last entry of a cumulative table
+that is <= u. A bisection branches on every comparison, and which way it goes is a coin
+flip: on the CPU about half of the steps mispredict (~13 cycles each on Zen 3). For the
+light pick (``emitters``: the scene's light CDF) a search that halves the candidate range
+with a select instead (Khuong and Morin 2017, "Array Layouts for Comparison-Based
+Searching", the branch-free binary search) gave the Cornell box +4.7 % camera paths/s on
+2 EPYC cores (``python -m bench.ab throughput --paired 24``, 2026-11-28). It finds the same
+index as a bisection over a non-decreasing table in the same number of steps.
 
-The searches here halve the candidate range with a select instead (Khuong and Morin 2017,
-"Array Layouts for Comparison-Based Searching", the branch-free binary search): the same
-index as a bisection over a non-decreasing table, the same number of steps, none of them a
-branch. LLVM turns such a select back into a branch when its condition compares a loaded
-value (x86 "cmov conversion": it expects a predictable branch), so on the CPU the select
-is emitted with LLVM's ``!unpredictable`` metadata, which keeps it a ``cmov``
-(:func:`select_le`). CUDA gets a plain select (``selp``); interpreted, a
-conditional expression.
+LLVM turns such a select back into a branch when its condition compares a loaded value
+(x86 "cmov conversion": it expects a predictable branch), so the select is emitted with
+LLVM's ``!unpredictable`` metadata, which keeps it a ``cmov`` (:func:`select_le`; CUDA
+would get a plain select, interpreted code a conditional expression). Not everywhere a
+win: the environment map's searches, whose tables miss the cache, ran slower so (each step
+then waits for its load; bunny-studio 0.91x, sun 0.84x): they use guide tables instead
+(``envmap``), and the GPU keeps the bisection.
 """
 from llvmlite import ir
 from numba import types
