@@ -34,7 +34,8 @@ def _hist(marg, cond, guide, texels, inf, n, n_t, n_p):
     bad = 0
     for i in range(n):
         k = path_key(i, 3, 77)
-        d, p = env_sample(marg, cond, guide, texels, inf, sample_1d(k, 0), sample_1d(k, 1))
+        d, p = env_sample(marg, cond, guide, texels, inf, sample_1d(k, 0), sample_1d(k, 1),
+                          True)
         if p <= 0:
             continue
         p2 = env_pdf(texels, inf, d)
@@ -226,7 +227,7 @@ def _lookups(texels, marg, cond, guide, inf, n):
     for i in range(n):
         k = path_key(i, 5, 91)
         d, p, b, u, v = env_sample_lit(marg, cond, guide, texels, inf, sample_1d(k, 0),
-                                       sample_1d(k, 1))
+                                       sample_1d(k, 1), True)
         a = env_eval(texels, inf, d)
         rel[i] = max(abs(a[0] - b[0]), abs(a[1] - b[1]), abs(a[2] - b[2])) / max(
             a[0], a[1], a[2], 1e-30)
@@ -268,7 +269,7 @@ def test_sampled_radiance_is_the_blend_at_the_sampled_point():
     for i in range(2000):
         k = path_key(i, 5, 91)
         _, p, le, u, v = env_sample_lit(marg, cond, guide, texels, info(30.0),
-                                        sample_1d(k, 0), sample_1d(k, 1))
+                                        sample_1d(k, 0), sample_1d(k, 1), True)
         assert p > 0
         ref = radiance_in_cell(texels, *env_cell(w, h, u, v))
         worst = max(worst, max(abs(a - b) for a, b in zip(le, ref)) / max(ref))
@@ -315,13 +316,13 @@ def test_compensated_density_is_the_excess_over_the_mean():
 
 
 @njit(cache=True)
-def _samples(marg, cond, guide, texels, inf, n):
-    """env_sample_lit's (u, v) and pdf for n stratified-random sample pairs."""
+def _samples(marg, cond, guide, texels, inf, n, guided):
+    """env_sample_lit's (u, v) and pdf for n random sample pairs."""
     out = np.zeros((n, 3), np.float32)
     for i in range(n):
         k = path_key(i, 7, 13)
         _, p, _, u, v = env_sample_lit(marg, cond, guide, texels, inf, sample_1d(k, 0),
-                                       sample_1d(k, 1))
+                                       sample_1d(k, 1), guided)
         out[i, 0] = u
         out[i, 1] = v
         out[i, 2] = p
@@ -330,11 +331,11 @@ def _samples(marg, cond, guide, texels, inf, n):
 
 @pytest.mark.parametrize("compensate", [True, False])
 def test_guided_search_finds_the_bisections_cells(compensate):
-    """The guide tables only shorten the searches: with them env_sample_lit gives the
-    samples it gives with one-interval guides (a bracket of every cell, a plain search),
+    """The guide tables only shorten the searches: with them (the CPU) env_sample_lit
+    gives the samples it gives searching every cell (the GPU) and with one-interval guides,
     on a sky with a sun (rows and runs of columns without mass when compensated) and on
-    random texels of an odd-sized map; and every guide entry is the last cell at or
-    below its quantile (guide_table)."""
+    random texels of an odd-sized map; and every guide entry is the last cell at or below
+    its quantile (guide_table)."""
     rng = np.random.default_rng(5)
     for img in (_sky_with_sun(), rng.random((13, 37, 3)).astype(np.float32) ** 4):
         texels, marg, cond, guide = environment_tables(img, compensate)
@@ -353,9 +354,9 @@ def test_guided_search_finds_the_bisections_cells(compensate):
         plain[h] = guide_table(marg, 1)
         inf = info(20.0)
         n = 100_000
-        a = _samples(marg, cond, guide, texels, inf, n)
-        b = _samples(marg, cond, plain, texels, inf, n)
-        assert np.array_equal(a, b)
+        a = _samples(marg, cond, guide, texels, inf, n, True)
+        assert np.array_equal(a, _samples(marg, cond, guide, texels, inf, n, False))
+        assert np.array_equal(a, _samples(marg, cond, plain, texels, inf, n, True))
 
 
 def test_compensated_sampling_chi_square():

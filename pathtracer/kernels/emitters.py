@@ -79,12 +79,14 @@ def make_emitters(features, target="cpu"):
     # branch the warp's lanes mostly take alike (the select-based one: Cornell 0.996x on
     # an H200; both 2026-11-28, python -m bench.ab)
     pick_light = last_at_most if target == "cpu" else sample_discrete
+    # the sky's searches from guide-table brackets on the CPU only (kernels.envmap)
+    ENV_GUIDED = target == "cpu"
     emitted = surface.emitted
 
     @step
     def sample_environment(env_marg, env_cond, env_guide, env_img, env_info, u1, u2):
         wi, pdf_dir, le, _, _ = env_sample_lit(env_marg, env_cond, env_guide, env_img,
-                                               env_info, u1, u2)
+                                               env_info, u1, u2, ENV_GUIDED)
         if not (pdf_dir > ZERO):
             return wi, INF, NO_RADIANCE, ZERO, False, -1
         return wi, INF, le, env_info[ENV_P_SELECT] * pdf_dir, False, -1
