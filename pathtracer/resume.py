@@ -26,6 +26,12 @@ FORMAT_VERSION = 1
 SUFFIX = ".state.npz"
 
 
+# arrays computed from others that the hash covers (the sky's guide tables: from env_marg
+# and env_cond, since 2026-11-28), left out so that a state saved before they existed
+# still resumes: they change no sample
+DERIVED_ARRAYS = frozenset({"env_guide"})
+
+
 def state_path(output):
     """The state file of an output image (or the path itself if it is a state file)."""
     if output.endswith(SUFFIX):
@@ -45,6 +51,8 @@ def scene_hash(compiled, max_bounces, rr_depth):
     h.update(repr((features, compiled.width, compiled.height,
                    int(max_bounces), int(rr_depth))).encode())
     for name, a in zip(compiled.arrays._fields, compiled.arrays):
+        if name in DERIVED_ARRAYS:
+            continue
         a = np.ascontiguousarray(a)
         h.update(f"{name}:{a.dtype.str}:{a.shape}".encode())
         h.update(a.reshape(-1).view(np.uint8))

@@ -207,3 +207,20 @@ def test_ray_worker_killed_mid_render():
     assert killed and after[0] != before[0]       # the worker was killed and restarted
     assert_same_render(whole, r)
     assert_same_render(pt.render(other, spp=16, backend="cpu"), wide)
+
+
+def test_scene_hash_leaves_out_derived_arrays():
+    """A render's saved state names its scene by a hash of the compiled arrays; the sky's
+    guide tables (derived from env_marg and env_cond, added 2026-11-28) are left out, so
+    a state saved before them still resumes, while a change of the tables they come from
+    is seen."""
+    from pathtracer.resume import scene_hash
+    from pathtracer.scene import load_scene
+    compiled = load_scene(os.path.join(ROOT, "scenes", "textured.json"))
+    assert compiled.features.env_map and compiled.arrays.env_guide.shape[0] > 2
+    before = scene_hash(compiled, 8, 5)
+    guide = compiled.arrays.env_guide
+    guide[...] = 0
+    assert scene_hash(compiled, 8, 5) == before
+    compiled.arrays.env_cond[0, 1] += 1.0
+    assert scene_hash(compiled, 8, 5) != before
