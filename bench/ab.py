@@ -18,7 +18,15 @@ seconds apart, so the ratio of their times hardly sees the machine's drift, whic
 whole rounds by 10-35 % on the 2-core CPU. It reports the median of the N per-pair ratios
 with a bootstrap 95 % interval: a tree against itself gave intervals of +-3-4 % there with
 40 pairs (rounds of separate processes: +-5-10 %), and a few tenths of a per cent on an
-H200 (docs/benchmarks.md, 2026-11-28).
+H200 (docs/benchmarks.md, 2026-11-28). But a worker process carries a speed of its own:
+the same tree against itself, 200 pairs on the 2-core CPU, measured bunny-studio 0.955
+(95 % 0.947-0.965) in one pair of workers (2026-11-29): the same compiled code runs a few
+per cent faster or slower from process to process (in one process, four loaded copies
+of one kernel ran 1.000-1.066 in one run, 0.979-1.002 in another), so a narrow interval
+of one pair of workers does not cover that bias. ``--blocks K`` runs K pairs of fresh
+workers (N pairs each, the trees' start order swapped from block to block) and reports
+the median of the blocks' ratios with an interval over blocks: use it for effects of a
+few per cent on the CPU.
 ``images``: every scene of ``scenes/`` and of the error-against-time study rendered on the
 CPU with each tree; the float32 pixel sums are compared bit for bit.
 """
@@ -211,34 +219,55 @@ def bootstrap_median_interval(values, n=4000, seed=0):
 
 
 def paired(args, name, res, spp, record):
-    """``throughput --paired``: the two trees' passes alternate in live workers."""
-    servers = []
-    try:
-        for t in args.trees:
-            servers.append(_Server(t, name, args.backend, res, spp, args.options))
-        times = [[], []]
-        for k in range(args.paired):
-            for i in ((0, 1) if k % 2 == 0 else (1, 0)):
-                times[i].append(servers[i].time_pass())
-    finally:
-        for s in servers:
-            s.close()
+    """``throughput --paired``: the two trees' passes alternate in live workers; with
+    ``--blocks K``, K such runs of fresh workers, the trees' order swapped from block to
+    block (see the module's docstring)."""
+    blocks = max(args.blocks, 1)
+    times = [[], []]
+    block_ratios = []
+    ratios = []
+    for blk in range(blocks):
+        order = (0, 1) if blk % 2 == 0 else (1, 0)      # which tree's worker starts first
+        servers = {}
+        try:
+            for i in order:
+                servers[i] = _Server(args.trees[i], name, args.backend, res, spp, args.options)
+            got = [[], []]
+            for k in range(args.paired):
+                for i in (order if k % 2 == 0 else order[::-1]):
+                    got[i].append(servers[i].time_pass())
+        finally:
+            for srv in servers.values():
+                srv.close()
+        for i in (0, 1):
+            times[i] += got[i]
+            record["results"].append(dict(servers[i].info, pass_s=got[i], block=blk,
+                                          paths_per_s=res[0] * res[1] * spp /
+                                          statistics.median(got[i])))
+        r = [a / b for a, b in zip(*got)]           # B's paths/s over A's, pair by pair
+        ratios += r
+        block_ratios.append(statistics.median(r))
     paths = res[0] * res[1] * spp
-    ratios = [a / b for a, b in zip(*times)]       # B's paths/s over A's, pair by pair
-    lo, hi = bootstrap_median_interval(ratios)
     labels = args.trees if args.trees[0] != args.trees[1] else [
         f"{t} ({k + 1})" for k, t in enumerate(args.trees)]
     per_tree = {t: paths / statistics.median(ts) for t, ts in zip(labels, times)}
-    for s, ts in zip(servers, times):
-        record["results"].append(dict(s.info, pass_s=ts,
-                                      paths_per_s=paths / statistics.median(ts)))
-    ratio = statistics.median(ratios)
+    if blocks > 1:
+        # (each block's workers carry their own bias: the interval is over blocks)
+        ratio = statistics.median(block_ratios)
+        lo, hi = bootstrap_median_interval(block_ratios)
+        how = (f"{blocks} blocks of {args.paired} pairs; blocks " +
+               " ".join(f"{x:.3f}" for x in block_ratios))
+    else:
+        ratio = statistics.median(ratios)
+        lo, hi = bootstrap_median_interval(ratios)
+        how = f"{args.paired} pairs"
     print(f"{name:14s} {args.backend:5s} " + "  ".join(
         f"{t}: {per_tree[t] / 1e6:8.3f} M paths/s" for t in labels) +
-        f"   ratio {ratio:.3f} (95 % {lo:.3f}-{hi:.3f}, {args.paired} pairs)", flush=True)
+        f"   ratio {ratio:.3f} (95 % {lo:.3f}-{hi:.3f}, {how})", flush=True)
     record.setdefault("summary", {})[name] = {
         "paths_per_s": per_tree, "ratio": ratio, "ratio_interval_95": [lo, hi],
-        "pairs": args.paired, "pair_ratios": ratios}
+        "pairs": args.paired, "blocks": blocks, "block_ratios": block_ratios,
+        "pair_ratios": ratios}
 
 
 def throughput(args):
@@ -337,6 +366,10 @@ def main(argv=None):
     t.add_argument("--paired", type=int, default=0, metavar="N",
                    help="N pairs of passes from two live workers, alternating (instead of "
                         "--rounds and --repeats): the per-pair ratio's median and interval")
+    t.add_argument("--blocks", type=int, default=1, metavar="K",
+                   help="with --paired: K runs of fresh workers (the trees' order swapped "
+                        "each block); the ratio is the median of the blocks' medians, its "
+                        "interval over blocks")
     t.add_argument("--resolution", type=_size, help="WxH instead of the scene's benchmark "
                    "size")
     t.add_argument("--spp", type=int, help="samples per pixel per pass (default: the "
@@ -359,6 +392,8 @@ def main(argv=None):
     w.add_argument("--repeats", type=int, default=5)
     w.add_argument("--options")
     args = p.parse_args(argv)
+    if args.cmd == "throughput" and args.blocks > 1 and not args.paired:
+        t.error("--blocks applies to --paired")
     {"throughput": throughput, "images": images, "_worker": worker}[args.cmd](args)
 
 

@@ -13,7 +13,13 @@ Writes a JSON record and prints a markdown table.
     python -m bench.throughput --cpu [--mitsuba] [--big-mesh PATH] [--json OUT]
     python -m bench.throughput --gpu [--mitsuba] [--json OUT]
     python -m bench.throughput --cpu --scenes cornell-box bunny-studio sun [--rounds 3]
-        [--samplers sobol independent]
+        [--samplers sobol independent] [--processes 5]
+
+``--processes K`` (with ``--scenes``): the whole comparison K times, each in a fresh
+process, and the median of the K processes' ratios. A process's compiled kernels run a few
+per cent faster or slower than the same kernels in another process (on the 2-core CPU the
+same tree against itself in one pair of workers measured 0.955, 2026-11-29: bench.ab's
+docstring), so rounds within one process share that bias; separate processes do not.
 """
 import argparse
 import json
@@ -224,6 +230,44 @@ def big_mesh(path):
             "bvh_build_s_all": times, "bvh_nodes": int(len(bvh.box)), "bvh_depth": bvh.depth}
 
 
+def _run_child(argv):
+    """``python -m bench.throughput ARGV`` in a fresh process (an error ends the run)."""
+    subprocess.run([sys.executable, "-m", "bench.throughput", *argv], check=True)
+
+
+def in_processes(a):
+    """``--processes K``: this command without --processes, K times in fresh processes;
+    per scene the median over processes of each one's ratio of medians."""
+    rec = {"command": command(), "machine": machine(), "date": now(), "versions": versions(),
+           "processes": []}
+    argv = ["--cpu", "--scenes", *a.scenes, "--rounds", str(a.rounds), "--repeats",
+            str(a.repeats), "--spp", str(a.spp), "--samplers", *a.samplers]
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in range(a.processes):
+            out = os.path.join(tmp, f"{k}.json")
+            print(f"process {k + 1} of {a.processes}", flush=True)
+            _run_child([*argv, "--json", out])
+            with open(out) as f:
+                rec["processes"].append(json.load(f)["scenes"])
+    rec["summary"] = {}
+    print(f"\n{rec['command']}\n{rec['machine']}, {rec['date']}\n")
+    for name in a.scenes:
+        rows = [next(r for r in scenes if r["scene"] == name) for scenes in rec["processes"]]
+        if not all("ratio_of_medians_by_sampler" in r or "ratio_of_medians" in r
+                   for r in rows):
+            continue
+        by = {x: [r.get("ratio_of_medians_by_sampler", {x: r["ratio_of_medians"]})[x]
+                  for r in rows] for x in dict.fromkeys(a.samplers)}
+        rec["summary"][name] = {x: {"ratio_per_process": v, "median": float(np.median(v))}
+                                for x, v in by.items()}
+        print(f"{name}: " + "; ".join(
+            f"{x} {np.median(v):.3f}x Mitsuba (processes " +
+            ", ".join(f"{r:.3f}" for r in v) + ")" for x, v in by.items()), flush=True)
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump(rec, f, indent=1)
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--cpu", action="store_true")
@@ -240,8 +284,15 @@ def main():
     p.add_argument("--samplers", nargs="+", choices=("sobol", "independent"),
                    default=["sobol"], help="(--scenes) ours with each of these samplers, "
                    "the first the main figure (Mitsuba runs its independent sampler)")
+    p.add_argument("--processes", type=int, default=1, metavar="K",
+                   help="(--scenes) the comparison in K fresh processes; the record keeps "
+                        "each process's rounds and the median of their ratios")
     p.add_argument("--json", help="write the record here")
     a = p.parse_args()
+    if a.processes > 1:
+        if not a.scenes:
+            p.error("--processes applies to --scenes")
+        return in_processes(a)
     if a.scenes and not a.cpu:
         p.error("--scenes measures the CPU backend: give --cpu")
     if a.samplers != ["sobol"] and not a.scenes:

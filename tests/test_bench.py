@@ -386,23 +386,62 @@ def test_throughput_on_the_convergence_scenes_alternates_rounds(monkeypatch):
 
 
 def test_ab_paired_alternates_live_workers(tmp_path):
-    """`python -m bench.ab throughput --paired N`: one live worker per tree, their timed
-    passes alternating; the record has N times per tree and N pair ratios, the median's
-    bootstrap interval around the median (a tree against itself, on a tiny image)."""
+    """`python -m bench.ab throughput --paired N --blocks K`: K blocks of fresh workers, one
+    live worker per tree in each, their timed passes alternating; the record has N times
+    per tree and block, N x K pair ratios, K block ratios whose median is the figure, with
+    the bootstrap interval around it (a tree against itself, on a tiny image)."""
     import json
     out = tmp_path / "ab.json"
     r = subprocess.run([sys.executable, "-m", "bench.ab", "throughput", "--trees", ".", ".",
-                        "--paired", "4", "--scenes", "cornell-box", "--resolution", "32x24",
-                        "--spp", "1", "--json", str(out)],
+                        "--paired", "3", "--blocks", "2", "--scenes", "cornell-box",
+                        "--resolution", "32x24", "--spp", "1", "--json", str(out)],
                        cwd=ROOT, capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stderr[-2000:]
     rec = json.loads(out.read_text())
     s = rec["summary"]["cornell-box"]
-    assert s["pairs"] == 4 and len(s["pair_ratios"]) == 4
+    assert s["pairs"] == 3 and s["blocks"] == 2 and len(s["pair_ratios"]) == 6
+    assert len(s["block_ratios"]) == 2
+    assert s["ratio"] == pytest.approx(float(np.median(s["block_ratios"])))
     assert s["ratio_interval_95"][0] <= s["ratio"] <= s["ratio_interval_95"][1]
-    assert [len(x["pass_s"]) for x in rec["results"]] == [4, 4]
+    assert [len(x["pass_s"]) for x in rec["results"]] == [3, 3, 3, 3]
+    assert [x["block"] for x in rec["results"]] == [0, 0, 1, 1]
     assert all(x["resolution"] == [32, 24] and x["spp"] == 1 for x in rec["results"])
-    assert "ratio" in r.stdout and "4 pairs" in r.stdout
+    assert "ratio" in r.stdout and "2 blocks of 3 pairs" in r.stdout
+
+
+def test_throughput_in_processes_takes_the_median_of_processes(monkeypatch, tmp_path):
+    """`python -m bench.throughput --cpu --scenes ... --processes K`: the comparison run K
+    times as a child command (the same options, without --processes), and per scene and
+    sampler the median of the K processes' ratios (children faked here: each writes a
+    record with its own ratios)."""
+    import json
+    import bench.throughput as tp
+    calls = []
+
+    def run(cmd):
+        calls.append(cmd)
+        k = len(calls)
+        scenes = [{"scene": "sun", "ratio_of_medians": 0.9 + 0.1 * k,
+                   "ratio_of_medians_by_sampler": {"sobol": 0.9 + 0.1 * k,
+                                                   "independent": 1.0 + 0.1 * k}}]
+        with open(cmd[cmd.index("--json") + 1], "w") as f:
+            json.dump({"scenes": scenes}, f)
+    monkeypatch.setattr(tp, "_run_child", run)
+    out = tmp_path / "rec.json"
+    monkeypatch.setattr(sys, "argv", ["throughput", "--cpu", "--scenes", "sun", "--samplers",
+                                      "sobol", "independent", "--rounds", "2",
+                                      "--processes", "3", "--json", str(out)])
+    tp.main()
+    assert len(calls) == 3
+    assert all("--processes" not in c and c[c.index("--rounds") + 1] == "2" for c in calls)
+    assert all(c[c.index("--samplers") + 1:c.index("--samplers") + 3] == ["sobol",
+               "independent"] for c in calls)
+    rec = json.loads(out.read_text())
+    assert len(rec["processes"]) == 3
+    s = rec["summary"]["sun"]
+    assert s["sobol"]["ratio_per_process"] == pytest.approx([1.0, 1.1, 1.2])
+    assert s["sobol"]["median"] == pytest.approx(1.1)
+    assert s["independent"]["median"] == pytest.approx(1.2)
 
 
 def test_ab_paired_stops_on_a_tree_that_fails(tmp_path):
@@ -428,15 +467,17 @@ def test_bootstrap_median_interval():
 def test_bench_scripts_refuse_bad_arguments_in_one_line():
     """A malformed size or a tree that is not a folder (a revision's name) for bench.ab, and
     bench.throughput --scenes without --cpu or with an unknown scene, --samplers without
-    --scenes or with an unknown sampler: argparse's one-line error (exit 2), no
-    traceback."""
+    --scenes or with an unknown sampler, --processes without --scenes, bench.ab's --blocks
+    without --paired: argparse's one-line error (exit 2), no traceback."""
     for args in (["bench.ab", "throughput", "--trees", ".", ".", "--resolution", "64"],
                  ["bench.ab", "throughput", "--trees", "HEAD", ".", "--scenes", "sun"],
                  ["bench.ab", "images", "--trees", ".", ".", "--resolution", "0x5"],
                  ["bench.throughput", "--gpu", "--scenes", "sun"],
                  ["bench.throughput", "--cpu", "--scenes", "nope"],
                  ["bench.throughput", "--cpu", "--samplers", "independent"],
-                 ["bench.throughput", "--cpu", "--scenes", "sun", "--samplers", "halton"]):
+                 ["bench.throughput", "--cpu", "--scenes", "sun", "--samplers", "halton"],
+                 ["bench.throughput", "--cpu", "--processes", "3"],
+                 ["bench.ab", "throughput", "--trees", ".", ".", "--blocks", "3"]):
         r = subprocess.run([sys.executable, "-m", *args], cwd=ROOT, capture_output=True,
                            text=True, timeout=120)
         assert r.returncode == 2, (args, r.stderr)
