@@ -256,8 +256,10 @@ def in_processes(a):
         if not all("ratio_of_medians_by_sampler" in r or "ratio_of_medians" in r
                    for r in rows):
             continue
-        by = {x: [r.get("ratio_of_medians_by_sampler", {x: r["ratio_of_medians"]})[x]
-                  for r in rows] for x in dict.fromkeys(a.samplers)}
+        # (one sampler: a record has ratio_of_medians alone)
+        by = {x: [r["ratio_of_medians_by_sampler"][x] if "ratio_of_medians_by_sampler" in r
+                  else r["ratio_of_medians"] for r in rows]
+              for x in dict.fromkeys(a.samplers)}
         rec["summary"][name] = {x: {"ratio_per_process": v, "median": float(np.median(v))}
                                 for x, v in by.items()}
         print(f"{name}: " + "; ".join(
@@ -289,14 +291,14 @@ def main():
                         "each process's rounds and the median of their ratios")
     p.add_argument("--json", help="write the record here")
     a = p.parse_args()
-    if a.processes > 1:
-        if not a.scenes:
-            p.error("--processes applies to --scenes")
-        return in_processes(a)
     if a.scenes and not a.cpu:
         p.error("--scenes measures the CPU backend: give --cpu")
     if a.samplers != ["sobol"] and not a.scenes:
         p.error("--samplers applies to --scenes")
+    if a.processes > 1:
+        if not a.scenes:
+            p.error("--processes applies to --scenes")
+        return in_processes(a)
     rec = {"command": command(), "machine": machine(), "date": now(), "versions": versions(),
            "results": []}
     if a.cpu and a.scenes:

@@ -477,6 +477,7 @@ def test_bench_scripts_refuse_bad_arguments_in_one_line():
                  ["bench.throughput", "--cpu", "--samplers", "independent"],
                  ["bench.throughput", "--cpu", "--scenes", "sun", "--samplers", "halton"],
                  ["bench.throughput", "--cpu", "--processes", "3"],
+                 ["bench.throughput", "--scenes", "sun", "--processes", "3"],
                  ["bench.ab", "throughput", "--trees", ".", ".", "--blocks", "3"]):
         r = subprocess.run([sys.executable, "-m", *args], cwd=ROOT, capture_output=True,
                            text=True, timeout=120)
