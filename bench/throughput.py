@@ -231,8 +231,12 @@ def big_mesh(path):
 
 
 def _run_child(argv):
-    """``python -m bench.throughput ARGV`` in a fresh process (an error ends the run)."""
-    subprocess.run([sys.executable, "-m", "bench.throughput", *argv], check=True)
+    """``python -m bench.throughput ARGV`` in a fresh process; one that fails ends the run
+    with a one-line message (its own error is above it)."""
+    r = subprocess.run([sys.executable, "-m", "bench.throughput", *argv])
+    if r.returncode != 0:
+        sys.exit(f"bench.throughput: a child process failed (exit {r.returncode}): "
+                 f"python -m bench.throughput {' '.join(argv)}")
 
 
 def in_processes(a):

@@ -444,6 +444,15 @@ def test_throughput_in_processes_takes_the_median_of_processes(monkeypatch, tmp_
     assert s["independent"]["median"] == pytest.approx(1.2)
 
 
+def test_throughput_child_that_fails_ends_in_one_line():
+    """A child process of --processes that fails (here: an unknown scene) ends the run with
+    a message naming its command, not a traceback."""
+    import bench.throughput as tp
+    with pytest.raises(SystemExit) as e:
+        tp._run_child(["--cpu", "--scenes", "nope"])
+    assert "child process failed (exit 2)" in str(e.value) and "nope" in str(e.value)
+
+
 def test_ab_paired_stops_on_a_tree_that_fails(tmp_path):
     """A tree whose worker cannot start (here: no pt-render in it) ends the run with a
     message naming the worker; the other tree's worker is not left behind."""
