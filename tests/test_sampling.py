@@ -128,7 +128,7 @@ def test_discrete_sampling_matches_pmf():
     assert sample_discrete(cdf, np.float32(np.nextafter(np.float32(1), np.float32(0)))) == 6
 
 
-@njit(cache=True)
+@njit   # not cached: inspect_asm needs a fresh compile (a cached copy has no assembly)
 def _branch_free_picks(cdf, u):
     out = np.empty(u.shape[0], np.int64)
     for i in range(u.shape[0]):
