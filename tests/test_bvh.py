@@ -12,8 +12,9 @@ from pathtracer.accel import build_bvh, sah_cost
 from pathtracer.kernels.constants import INF, STACK_SIZE
 from pathtracer.kernels.intersect import ray_triangle
 from pathtracer.kernels.traverse import _load_node, any_hit, closest_hit
-from pathtracer.kernels.wide import any_hit_wide, closest_hit_wide
-from pathtracer.accel.wide import WIDE_STACK_SIZE, widen_bvh
+from pathtracer.kernels.wide import (PACKET, any_hit_wide, closest_hit_packet,
+                                     closest_hit_wide, packet_ray_hit, packet_set_ray)
+from pathtracer.accel.wide import WIDE_STACK_SIZE, WIDE_TRAVERSAL_WORDS, widen_bvh
 from pathtracer.scene.meshes import load_obj
 from tests.conftest import SHARED, needs_shared
 
@@ -62,6 +63,48 @@ def trace_all_wide(origins, dirs, tri_v, wide, wchild, skips, skips_b):
         out_any[k] = any_hit_wide(o, d, INF, skips[k], skips_b[k], tri_v, wide, wchild,
                                   stack)
     return out_t, out_i, out_b, out_any
+
+
+@njit(cache=True)
+def trace_all_packets(origins, dirs, wide, wchild, n_lanes):
+    """closest_hit_packet's hits (t, triangle, b1, b2) of the rays in packets of n_lanes
+    consecutive rays (the last one as many as are left; unused lanes t_max -1)."""
+    n = origins.shape[0]
+    out_t = np.empty(n, np.float32)
+    out_i = np.empty(n, np.int32)
+    out_b = np.empty((n, 2), np.float32)
+    stack = np.empty(WIDE_STACK_SIZE, np.int32)
+    for first in range(0, n, n_lanes):
+        used = min(n_lanes, n - first)
+        for lane in range(PACKET):
+            if lane < used:
+                k = first + lane
+                packet_set_ray(stack, lane, (origins[k, 0], origins[k, 1], origins[k, 2]),
+                               (dirs[k, 0], dirs[k, 1], dirs[k, 2]), INF)
+            else:
+                packet_set_ray(stack, lane, (np.float32(0), np.float32(0), np.float32(0)),
+                               (np.float32(1), np.float32(1), np.float32(1)), np.float32(-1))
+        closest_hit_packet(wide, wchild, stack)
+        for lane in range(used):
+            _, _, t, i, b1, b2 = packet_ray_hit(stack, lane)
+            out_t[first + lane] = t
+            out_i[first + lane] = i
+            out_b[first + lane, 0] = b1
+            out_b[first + lane, 1] = b2
+    return out_t, out_i, out_b
+
+
+def check_packets(origins, dirs, wide, wchild, tw, iw, bw):
+    """The camera rays' packets (kernels.wide.closest_hit_packet) find each ray's hit of
+    closest_hit_wide (tw, iw, bw; rays that skip no triangle): the same distance and
+    barycentrics, the triangle the same but at a tie; in packets of 8 rays and, with
+    unused lanes, of 3."""
+    for n_lanes in (PACKET, 3):
+        tp, ip, bp = trace_all_packets(origins, dirs, wide, wchild, n_lanes)
+        assert np.array_equal(tp, tw)
+        same = ip == iw
+        assert (same | (tp == tw)).all()
+        assert np.array_equal(bp[same], bw[same])
 
 
 @njit(cache=True, parallel=True)
@@ -119,6 +162,8 @@ def check_against_brute_force(pos, origins, dirs, skips=None, **options):
     _, _, _, aw2 = trace_all_wide(origins, dirs, tri_v, wide, wchild, skips, ib)
     _, ib2 = brute_force(origins, dirs, tri_v, len(pos), skips, ib)
     assert np.array_equal(aw2, ib2 >= 0)
+    free = skips < 0
+    check_packets(origins[free], dirs[free], wide, wchild, tw[free], iw[free], bw[free])
     return bvh, t, i
 
 
@@ -159,7 +204,7 @@ def check_wide_structure(bvh, wide, wchild, tri_v, n):
                     assert np.array_equal(group[t % W.LANES::W.LANES], tri_v[first + t])
         assert (wchild[k, W.WCHILD_INNER], wchild[k, W.WCHILD_LEAVES]) == (inner, leaves)
     assert (seen == 1).all()
-    assert 2 * (W.WIDTH - 1) * depth.max() + 2 <= WIDE_STACK_SIZE
+    assert 2 * (W.WIDTH - 1) * depth.max() + 2 <= WIDE_TRAVERSAL_WORDS
 
 
 def check_structure(bvh, pos):
@@ -384,6 +429,28 @@ def test_wide_traversal_interpreted_matches_compiled(rng):
             assert (t, i, b1, b2) == (tw[k], iw[k], bw[k, 0], bw[k, 1])
             assert any_hit_wide(o, d, INF, -1, -1, tri_v, wide, wchild, stack) == aw[k]
     assert (iw >= 0).sum() > 10
+    # the camera rays' packets (box_rays8, triangle_rays8, bits_float in Python), eight
+    # rays from one point into the cube, then a packet of five (three lanes unused)
+    eye = np.array([0.5, 0.5, -1.0], np.float32)
+    aims = (0.2 + 0.6 * rng.random((PACKET + 5, 3)) - eye).astype(np.float32)
+    aims /= np.linalg.norm(aims, axis=1)[:, None]
+    hits = 0
+    for first, used in ((0, PACKET), (PACKET, 5)):
+        for lane in range(PACKET):
+            if lane < used:
+                packet_set_ray(stack, lane, tuple(eye), tuple(aims[first + lane]), INF)
+            else:
+                packet_set_ray(stack, lane, (0.0, 0.0, 0.0), (1.0, 1.0, 1.0), -1.0)
+        with np.errstate(all="ignore"):
+            closest_hit_packet(wide, wchild, stack)
+        rays = np.repeat(eye[None], used, 0), aims[first:first + used]
+        tc, ic, bc = trace_all_packets(*rays, wide, wchild, PACKET)
+        for lane in range(used):
+            o, d, t, i, b1, b2 = packet_ray_hit(stack, lane)
+            assert (o, d) == (tuple(eye), tuple(aims[first + lane]))
+            assert (t, i, b1, b2) == (tc[lane], ic[lane], bc[lane, 0], bc[lane, 1])
+            hits += i >= 0
+    assert hits > 6
 
 
 def test_rays_leaving_a_triangle_near_its_edge_do_not_meet_the_neighbours_band():

@@ -15,13 +15,16 @@ from .._cache import jit_cache, read_only
 from ..kernels.constants import STACK_SIZE
 from ..kernels.layout import (BOX_STRIDE, BOX_WIDTH, CHILD_COUNT, CHILD_INDEX, CHILD_STRIDE,
                               TRI_V_WIDTH)
-from ..kernels.wide import (GROUP_ROWS, LANES, NODE_ROWS, WCHILD_COUNT, WCHILD_FIRST,
-                            WCHILD_INDEX, WCHILD_INNER, WCHILD_LEAVES, WCHILD_WIDTH, WIDE_ROW,
-                            WIDTH)
+from ..kernels.wide import (GROUP_ROWS, LANES, NODE_ROWS, PACKET_WORDS, WCHILD_COUNT,
+                            WCHILD_FIRST, WCHILD_INDEX, WCHILD_INNER, WCHILD_LEAVES,
+                            WCHILD_WIDTH, WIDE_ROW, WIDTH)
 
-# closest_hit_wide pushes at most seven (node, distance) pairs more than it pops per level of
-# the wide tree, which is no deeper than the binary one (MAX_DEPTH = STACK_SIZE - 4 levels)
-WIDE_STACK_SIZE = 2 * (WIDTH - 1) * STACK_SIZE + 8
+# closest_hit_wide (and closest_hit_packet) push at most seven (node, distance) pairs more
+# than they pop per level of the wide tree, which is no deeper than the binary one
+# (MAX_DEPTH = STACK_SIZE - 4 levels); the stack's last PACKET_WORDS words hold the camera
+# rays' packet (kernels.wide.closest_hit_packet)
+WIDE_TRAVERSAL_WORDS = 2 * (WIDTH - 1) * STACK_SIZE + 8
+WIDE_STACK_SIZE = WIDE_TRAVERSAL_WORDS + PACKET_WORDS
 
 
 @njit(cache=jit_cache())
@@ -214,5 +217,5 @@ def widen_bvh(tri_v, bvh_box, bvh_child, merge=LANES):
     # (read-only, as in a Ray worker: one compiled version, see _cache.read_only)
     tri_v, bvh_box, bvh_child = read_only(tri_v), read_only(bvh_box), read_only(bvh_child)
     wbox, wchild, depth = _collapse(bvh_box, bvh_child, merge)
-    assert 2 * (WIDTH - 1) * depth + 2 <= WIDE_STACK_SIZE, depth
+    assert 2 * (WIDTH - 1) * depth + 2 <= WIDE_TRAVERSAL_WORDS, depth
     return _pack(tri_v, wbox, wchild), wchild

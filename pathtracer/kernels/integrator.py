@@ -46,7 +46,8 @@ from .scatter import make_scatter
 from .surface import make_surface
 from .textures import NO_FOOTPRINT, cone_footprint
 from .traverse import any_hit, closest_hit
-from .wide import any_hit_wide, closest_hit_wide
+from .wide import (PACKET, any_hit_wide, closest_hit_packet, closest_hit_wide,
+                   packet_ray_hit, packet_set_ray)
 from .vec import (add, cross, dot, load3, madd, max_comp, mul, neg, normalize, scale,
                   to_world)
 from .warps import power_heuristic
@@ -60,6 +61,11 @@ __all__ = ["Features", "SceneArrays", "make_render_pixel", "make_wavefront"]
 AOV_SPECULAR_ROUGHNESS = np.float32(0.1)
 AOV_MAX_SPECULAR = 8        # specular surfaces followed at most
 HALF_F = np.float32(0.5)
+# The fewest camera rays traced as a packet (kernels.wide.closest_hit_packet; fewer: one by
+# one): with four of eight lanes used, packets ran 0.97-1.01x the single rays' paths/s
+# (4-spp passes), with all eight 1.03-1.06x (16-spp passes; 2-core EPYC, bench.ab,
+# 2026-11-29).
+PACKET_MIN_RAYS = 5
 # Trilinear textures are filtered over ray-cone footprints at the camera's hit and the
 # first bounce's; later hits read the image itself (bilinearly). Filtering every bounce
 # cost 29 % of the textured scene's paths/s on an H100 (2026-11-23, bench.ab) for lookups
@@ -117,6 +123,9 @@ def make_kernels(features, target="cpu"):
     WIDE = target == "cpu"
     trace_closest = closest_hit_wide if WIDE else closest_hit
     trace_any = any_hit_wide if WIDE else any_hit
+    # The CPU traces a pixel's camera rays eight at a time (kernels.wide.closest_hit_packet:
+    # SIMD over the rays; camera_packet below), and each path starts from its ray's hit.
+    CAMERA_PACKETS = WIDE
     start_path, open_set, draw = make_sampler(S.sobol, table=target == "cpu")
     # The CPU's sobol sampler returns a set's four numbers when the set is opened
     # (rng.make_sampler), so Russian roulette draws from the BSDF set the bounce opened
@@ -371,9 +380,40 @@ def make_kernels(features, target="cpu"):
             n_bounce_rays += bounce_rays
         store_pixel(out, stats, px, py, r, g, b, n_bounce_rays, n_shadow_rays, n_bad)
 
+    @step
+    def camera_packet(px, py, sample_first, n_rays, seed, width, height, scene, stack):
+        """The camera rays of samples sample_first .. + n_rays (n_rays <= PACKET) of pixel
+        (px, py) traced together, their hits left in the stack's packet for render_sample
+        (lane: sample - sample_first)."""
+        for lane in range(n_rays):
+            state = start_path(py * width + px, sample_first + lane, seed)
+            o, d = camera_ray(scene.cam, px, py, state, width, height)
+            packet_set_ray(stack, lane, o, d, INF)
+        for lane in range(n_rays, PACKET):      # (an unused lane enters no box)
+            packet_set_ray(stack, lane, (ZERO, ZERO, ZERO), (ONE, ONE, ONE), -ONE)
+        closest_hit_packet(scene.bvh_box, scene.bvh_child, stack)
+
+    @step
+    def next_camera_lane(px, py, s, sample_start, n_samples, seed, width, height, scene,
+                         stack):
+        """Sample s's lane of the camera packet, tracing the next packet of the pixel's rays
+        (up to PACKET, from sample s) first when s starts one; -1: the sample traces its
+        own camera ray (elsewhere than on the CPU, and the last few samples of a pass
+        that leave fewer than PACKET_MIN_RAYS: a packet half empty costs what it saves,
+        2-core EPYC, bench.ab, 2026-11-29)."""
+        if not CAMERA_PACKETS:
+            return -1
+        lane = (s - sample_start) % PACKET
+        n_rays = min(PACKET, sample_start + n_samples - (s - lane))
+        if n_rays < PACKET_MIN_RAYS:
+            return -1
+        if lane == 0:
+            camera_packet(px, py, s, n_rays, seed, width, height, scene, stack)
+        return lane
+
     @entry_inlined
     def render_sample(px, py, sample_index, seed, width, height, max_bounces, rr_depth,
-                      scene, stack):
+                      scene, stack, lane):
         """Radiance (r, g, b) of one camera path through pixel (px, py), with the number of
         bounce rays and shadow rays it traced: render_pixel_nested's path, path_vertex's
         steps written out in one loop. On the GPU, in the scenes that run one path after
@@ -385,9 +425,19 @@ def make_kernels(features, target="cpu"):
         out_ray, the path's last ray (o, d) left the scene towards an environment, whose
         radiance (weighted by MIS against pdf_prev, the density of the BSDF sample that made
         the ray, and by the throughput beta) the caller adds to (r, g, b) with escaped
-        (render_pixel_nested) or later (the CPU's render_pixel_deferred)."""
+        (render_pixel_nested) or later (the CPU's render_pixel_deferred).
+
+        ``lane`` >= 0 (on the CPU): the camera ray and its hit are that lane of the packet
+        that camera_packet traced (next_camera_lane)."""
         state = start_path(py * width + px, sample_index, seed)
-        o, d = camera_ray(scene.cam, px, py, state, width, height)
+        camera_hit = False          # (whether the loop's first trace is the packet's)
+        if CAMERA_PACKETS:          # (a constant: elsewhere the branch is not compiled)
+            camera_hit = lane >= 0
+        if camera_hit:
+            o, d, t_cam, tri_cam, b1_cam, b2_cam = packet_ray_hit(stack, lane)
+        else:
+            o, d = camera_ray(scene.cam, px, py, state, width, height)
+            t_cam, tri_cam, b1_cam, b2_cam = INF, -1, ZERO, ZERO
         beta = (ONE, ONE, ONE)      # path throughput: product of f cos / pdf (and 1/q of RR)
         radiance = (ZERO, ZERO, ZERO)
         pdf_prev = ZERO             # solid-angle pdf of the BSDF sample that made this ray;
@@ -402,8 +452,12 @@ def make_kernels(features, target="cpu"):
         n_shadow_rays = 0
         out_ray = False
         while True:
-            t, tri, b1, b2 = trace_closest(o, d, INF, skip, scene.tri_v, scene.bvh_box,
-                                           scene.bvh_child, stack)
+            if camera_hit:
+                t, tri, b1, b2 = t_cam, tri_cam, b1_cam, b2_cam
+                camera_hit = False
+            else:
+                t, tri, b1, b2 = trace_closest(o, d, INF, skip, scene.tri_v, scene.bvh_box,
+                                               scene.bvh_child, stack)
             if tri < 0:
                 # (the caller adds what the ray sees: see the docstring)
                 out_ray = ANY_ENVIRONMENT
@@ -491,8 +545,10 @@ def make_kernels(features, target="cpu"):
         n_bounce = 0
         n_shadow = 0
         for s in range(sample_start, sample_start + n_samples):
+            lane = next_camera_lane(px, py, s, sample_start, n_samples, seed, width, height,
+                                    scene, stack)
             sr, sg, sb, nb, ns, out_ray, beta, d, pdf_prev = render_sample(
-                px, py, s, seed, width, height, max_bounces, rr_depth, scene, stack)
+                px, py, s, seed, width, height, max_bounces, rr_depth, scene, stack, lane)
             radiance = (sr, sg, sb)
             if out_ray:
                 le, weight = escaped(scene.env, scene.env_img, scene.env_info, d, pdf_prev)
@@ -572,8 +628,10 @@ def make_kernels(features, target="cpu"):
         n_bounce = 0
         n_shadow = 0
         for s in range(sample_start, sample_start + n_samples):
+            lane = next_camera_lane(px, py, s, sample_start, n_samples, seed, width, height,
+                                    scene, stack)
             sr, sg, sb, nb, ns, out_ray, beta, d, pdf_prev = render_sample(
-                px, py, s, seed, width, height, max_bounces, rr_depth, scene, stack)
+                px, py, s, seed, width, height, max_bounces, rr_depth, scene, stack, lane)
             slot = queued % ESCAPE_RING
             if queued >= ESCAPE_RING:
                 finish_record(esc_f, esc_i, slot, py, scene, out, stats)

@@ -447,3 +447,324 @@ def any_hit_wide(o, d, t_max, skip_a, skip_b, tri_v, wide, wchild, stack):
             return False
         sp -= 1
         row = stack[sp]
+
+
+
+# ---- camera rays in packets: eight rays traced together, SIMD over the rays ----------------
+# A pixel's camera rays (its samples of a pass) leave the same eye point (or lens) in
+# nearly the same direction, so they visit the same nodes and leaves. One ray at a time, a
+# traversal is a chain of dependent steps (load a node, test its boxes, pick the next) that
+# leaves the core waiting between them: a bunny-studio camera ray took ~115 ns for ~3 node
+# visits and ~1.2 triangle groups, cached and predicted (docs/benchmarks.md, 2026-11-29).
+# Traced together (Wald, Slusallek, Benthin and Wagner 2001, "Interactive Rendering with
+# Coherent Ray Tracing"; Embree's packet kernels), each child box is tested against the
+# eight rays in one <8 x float> slab test and each triangle against the eight rays in one
+# Moller-Trumbore test; a node is opened when any ray enters it, and each ray keeps its own
+# nearest hit. The tests' arithmetic is slab's and ray_triangle's (as slab8's and
+# triangles4's), operation for operation, and each ray tests triangles in leaf order with a
+# strictly-nearer rule, so a ray's hit is the one closest_hit_wide finds (tested), but for
+# two triangles at exactly the same distance, which the two visit orders may order
+# differently.
+#
+# The packet lives in the last PACKET_WORDS words of the traversal stack (int32; its
+# floats stored as their bits), so the kernels' arguments do not change; the traversals
+# use the stack from its start and never reach it (accel.wide.WIDE_STACK_SIZE). Rows of
+# PACKET lanes: the rays' origins (3 rows), 1/direction (3), directions (3), the nearest hit
+# distance so far (t_max to start with; -1 for an unused lane, which enters no box), b1,
+# b2, and the triangle hit (-1: none).
+
+PACKET = 8
+PK_O = 0
+PK_INV = 3
+PK_D = 6
+PK_T = 9
+PK_B1 = 10
+PK_B2 = 11
+PK_TRI = 12
+PK_ROWS = 13
+PACKET_WORDS = PK_ROWS * PACKET
+
+
+def bits_float(b):
+    """The float32 whose bits are the int32 b (float_bits' inverse)."""
+    return np.float32(np.array(b, np.int32).view(np.float32))
+
+
+def _packet_floats(stack):
+    """The packet's rows as float32 (PK_ROWS, PACKET), a view (the Python forms)."""
+    return stack[stack.shape[0] - PACKET_WORDS:].view(np.float32).reshape(PK_ROWS, PACKET)
+
+
+def box_rays8(wide, row, k, stack):
+    """(mask, t_min): the bit mask of the packet's rays that enter child k's box of the
+    node at ``row`` before their nearest hit so far (slab, as closest_hit_wide tests it),
+    and the least entry distance among them (INF if none)."""
+    f = wide[row:row + NODE_ROWS].reshape(-1)
+    p = _packet_floats(stack)
+    mask = 0
+    t_min = INF
+    for r in range(PACKET):
+        t = slab((p[PK_O, r], p[PK_O + 1, r], p[PK_O + 2, r]),
+                 (p[PK_INV, r], p[PK_INV + 1, r], p[PK_INV + 2, r]),
+                 f[k], f[WIDTH + k], f[2 * WIDTH + k], f[3 * WIDTH + k], f[4 * WIDTH + k],
+                 f[5 * WIDTH + k], p[PK_T, r])
+        if t < INF:
+            mask |= 1 << r
+            t_min = min(t_min, t)
+    return mask, np.float32(t_min)
+
+
+def triangle_rays8(wide, group_row, lane, tri, stack):
+    """The triangle in lane ``lane`` of the group at ``group_row`` (triangle number tri)
+    against the packet's rays: each ray that hits it strictly nearer than its nearest hit
+    so far takes it (t, b1, b2, tri)."""
+    f = wide[group_row:group_row + GROUP_ROWS].reshape(-1)
+    row = np.array([[f[LANES * a + lane] for a in range(9)]], np.float32)
+    p = _packet_floats(stack)
+    tris = stack[stack.shape[0] - PACKET:]
+    for r in range(PACKET):
+        t, b1, b2 = ray_triangle((p[PK_O, r], p[PK_O + 1, r], p[PK_O + 2, r]),
+                                 (p[PK_D, r], p[PK_D + 1, r], p[PK_D + 2, r]), row, 0,
+                                 p[PK_T, r])
+        if t < p[PK_T, r]:
+            p[PK_T, r] = t
+            p[PK_B1, r] = b1
+            p[PK_B2, r] = b2
+            tris[r] = tri
+
+
+def _packet_row(context, builder, stack_ty, stack_value, r, vty):
+    """A pointer to row r of the packet (vty: <8 x float> or <8 x i32>)."""
+    ary = context.make_array(stack_ty)(context, builder, stack_value)
+    n = builder.extract_value(ary.shape, 0)
+    start = builder.sub(n, context.get_constant(types.intp, PACKET_WORDS - PACKET * r))
+    return builder.bitcast(builder.gep(ary.data, [start]), vty.as_pointer())
+
+
+def _scalar_at(context, builder, wide_ty, wide_value, row_value, row_ty, offset):
+    """wide's float at flat index row * WIDE_ROW + offset (offset: an LLVM intp value)."""
+    ary = context.make_array(wide_ty)(context, builder, wide_value)
+    row = context.cast(builder, row_value, row_ty, types.intp)
+    idx = builder.add(builder.mul(row, context.get_constant(types.intp, WIDE_ROW)), offset)
+    return builder.load(builder.gep(ary.data, [idx]))
+
+
+def _is_int32_vector(a):
+    return isinstance(a, types.Array) and a.ndim == 1 and a.layout == "C" and (
+        a.dtype == types.int32)
+
+
+@intrinsic
+def _box_rays8_ir(typingctx, wide, row, k, stack):
+    if not (_is_float32_rows(wide) and isinstance(row, types.Integer)
+            and isinstance(k, types.Integer) and _is_int32_vector(stack)):
+        return None
+    sig = types.Tuple((types.int64, types.float32))(wide, row, k, stack)
+
+    def codegen(context, builder, signature, args):
+        v8, splat, lanes = _vector_helpers(context, builder, PACKET)
+        wide_ty, row_ty, k_ty, stack_ty = signature.args
+        k_value = context.cast(builder, args[2], k_ty, types.intp)
+
+        def plane(c):       # child k's coordinate c (lo_x .. hi_z), for every ray
+            off = builder.add(k_value, context.get_constant(types.intp, WIDTH * c))
+            return splat(_scalar_at(context, builder, wide_ty, args[0], args[1], row_ty, off))
+
+        def packet(r):
+            return builder.load(_packet_row(context, builder, stack_ty, args[3], r, v8),
+                                align=4)
+
+        def vmin(a, b):
+            return builder.select(builder.fcmp_ordered("<", b, a), b, a)
+
+        def vmax(a, b):
+            return builder.select(builder.fcmp_ordered(">", b, a), b, a)
+        near, far = [], []
+        for axis in range(3):
+            o = packet(PK_O + axis)
+            inv = packet(PK_INV + axis)
+            t0 = builder.fmul(builder.fsub(plane(axis), o), inv)
+            t1 = builder.fmul(builder.fsub(plane(3 + axis), o), inv)
+            near.append(vmin(t0, t1))
+            far.append(vmax(t0, t1))
+        zero = ir.Constant(v8, [0.0] * PACKET)
+        t_near = vmax(vmax(near[0], near[1]), vmax(near[2], zero))
+        t_far = builder.fmul(vmin(vmin(far[0], far[1]), vmin(far[2], packet(PK_T))),
+                             ir.Constant(v8, [float(SLAB_SCALE)] * PACKET))
+        inside = builder.fcmp_ordered("<=", t_near, t_far)
+        mask = builder.zext(builder.bitcast(inside, ir.IntType(PACKET)), ir.IntType(64))
+        t = builder.select(inside, t_near, ir.Constant(v8, [math.inf] * PACKET))
+        t_min = lanes(t)[0]
+        for x in lanes(t)[1:]:
+            t_min = builder.select(builder.fcmp_ordered("<", x, t_min), x, t_min)
+        return context.make_tuple(builder, signature.return_type, [mask, t_min])
+    return sig, codegen
+
+
+@intrinsic
+def _triangle_rays8_ir(typingctx, wide, group_row, lane, tri, stack):
+    if not (_is_float32_rows(wide) and isinstance(group_row, types.Integer)
+            and isinstance(lane, types.Integer) and isinstance(tri, types.Integer)
+            and _is_int32_vector(stack)):
+        return None
+    sig = types.none(wide, group_row, lane, tri, stack)
+
+    def codegen(context, builder, signature, args):
+        v8, splat, _ = _vector_helpers(context, builder, PACKET)
+        wide_ty, row_ty, lane_ty, tri_ty, stack_ty = signature.args
+        lane_value = context.cast(builder, args[2], lane_ty, types.intp)
+
+        def vertex(a):      # the triangle's float a (v0x .. e2z), for every ray
+            off = builder.add(lane_value, context.get_constant(types.intp, LANES * a))
+            return splat(_scalar_at(context, builder, wide_ty, args[0], args[1], row_ty, off))
+
+        def row_ptr(r, vty=v8):
+            return _packet_row(context, builder, stack_ty, args[4], r, vty)
+
+        def packet(r):
+            return builder.load(row_ptr(r), align=4)
+        mul, sub, add = builder.fmul, builder.fsub, builder.fadd
+        v0x, v0y, v0z, e1x, e1y, e1z, e2x, e2y, e2z = [vertex(a) for a in range(9)]
+        ox, oy, oz = [packet(PK_O + a) for a in range(3)]
+        dx, dy, dz = [packet(PK_D + a) for a in range(3)]
+        t_best = packet(PK_T)
+        # ray_triangle's arithmetic, in its order (no contraction: the same roundings)
+        px = sub(mul(dy, e2z), mul(dz, e2y))
+        py = sub(mul(dz, e2x), mul(dx, e2z))
+        pz = sub(mul(dx, e2y), mul(dy, e2x))
+        det = add(add(mul(e1x, px), mul(e1y, py)), mul(e1z, pz))
+        one = ir.Constant(v8, [1.0] * PACKET)
+        zero = ir.Constant(v8, [0.0] * PACKET)
+        inv_det = builder.fdiv(one, det)
+        sx, sy, sz = sub(ox, v0x), sub(oy, v0y), sub(oz, v0z)
+        b1 = mul(add(add(mul(sx, px), mul(sy, py)), mul(sz, pz)), inv_det)
+        qx = sub(mul(sy, e1z), mul(sz, e1y))
+        qy = sub(mul(sz, e1x), mul(sx, e1z))
+        qz = sub(mul(sx, e1y), mul(sy, e1x))
+        b2 = mul(add(add(mul(dx, qx), mul(dy, qy)), mul(dz, qz)), inv_det)
+        t = mul(add(add(mul(e2x, qx), mul(e2y, qy)), mul(e2z, qz)), inv_det)
+        ok = builder.fcmp_unordered("!=", det, zero)
+        for cond in (builder.fcmp_ordered(">=", b1, zero), builder.fcmp_ordered("<=", b1, one),
+                     builder.fcmp_ordered(">=", b2, zero),
+                     builder.fcmp_ordered("<=", add(b1, b2), one),
+                     builder.fcmp_ordered(">", t, zero),
+                     builder.fcmp_ordered("<", t, t_best)):
+            ok = builder.and_(ok, cond)
+        builder.store(builder.select(ok, t, t_best), row_ptr(PK_T), align=4)
+        builder.store(builder.select(ok, b1, packet(PK_B1)), row_ptr(PK_B1), align=4)
+        builder.store(builder.select(ok, b2, packet(PK_B2)), row_ptr(PK_B2), align=4)
+        vi = ir.VectorType(ir.IntType(32), PACKET)
+        tri32 = builder.trunc(context.cast(builder, args[3], tri_ty, types.int64),
+                              ir.IntType(32))
+        tris = ir.Constant(vi, ir.Undefined)
+        for r in range(PACKET):
+            tris = builder.insert_element(tris, tri32, ir.Constant(ir.IntType(32), r))
+        old = builder.load(row_ptr(PK_TRI, vi), align=4)
+        builder.store(builder.select(ok, tris, old), row_ptr(PK_TRI, vi), align=4)
+        return context.get_dummy_value()
+    return sig, codegen
+
+
+@intrinsic
+def _bits_float_ir(typingctx, b):
+    if b != types.int32:
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.FloatType())
+    return types.float32(b), codegen
+
+
+overload(box_rays8, strict=False)(
+    lambda wide, row, k, stack: (lambda wide, row, k, stack: _box_rays8_ir(wide, row, k, stack)))
+overload(triangle_rays8, strict=False)(
+    lambda wide, group_row, lane, tri, stack:
+    (lambda wide, group_row, lane, tri, stack:
+     _triangle_rays8_ir(wide, group_row, lane, tri, stack)))
+overload(bits_float, strict=False)(lambda b: (lambda b: _bits_float_ir(b)))
+
+
+@device
+def packet_set_ray(stack, lane, o, d, t_max):
+    """Lane ``lane`` of the packet: the ray (o, d) with no hit yet before t_max (-1: an
+    unused lane)."""
+    inv = safe_inverse(d)
+    base = stack.shape[0] - PACKET_WORDS + lane
+    for a in range(3):
+        stack[base + PACKET * (PK_O + a)] = float_bits(o[a])
+        stack[base + PACKET * (PK_INV + a)] = float_bits(inv[a])
+        stack[base + PACKET * (PK_D + a)] = float_bits(d[a])
+    stack[base + PACKET * PK_T] = float_bits(t_max)
+    stack[base + PACKET * PK_B1] = float_bits(ZERO)
+    stack[base + PACKET * PK_B2] = float_bits(ZERO)
+    stack[base + PACKET * PK_TRI] = -1
+
+
+@device
+def packet_ray_hit(stack, lane):
+    """Lane ``lane``'s ray and nearest hit: (o, d, t, tri, b1, b2), t = INF and tri = -1 on a
+    miss (closest_hit_wide's answer)."""
+    base = stack.shape[0] - PACKET_WORDS + lane
+    o = (bits_float(stack[base + PACKET * PK_O]), bits_float(stack[base + PACKET * (PK_O + 1)]),
+         bits_float(stack[base + PACKET * (PK_O + 2)]))
+    d = (bits_float(stack[base + PACKET * PK_D]), bits_float(stack[base + PACKET * (PK_D + 1)]),
+         bits_float(stack[base + PACKET * (PK_D + 2)]))
+    tri = stack[base + PACKET * PK_TRI]
+    if tri < 0:
+        return o, d, INF, -1, ZERO, ZERO
+    return (o, d, bits_float(stack[base + PACKET * PK_T]), tri,
+            bits_float(stack[base + PACKET * PK_B1]), bits_float(stack[base + PACKET * PK_B2]))
+
+
+@device
+def _packet_t_max(stack):
+    """The farthest nearest-hit distance of the packet's rays (a node entered beyond it by
+    every ray is of no use to any)."""
+    base = stack.shape[0] - PACKET_WORDS + PACKET * PK_T
+    t = bits_float(stack[base])
+    for r in range(1, PACKET):
+        t = max(t, bits_float(stack[base + r]))
+    return t
+
+
+@device
+def closest_hit_packet(wide, wchild, stack):
+    """The nearest hits of the packet's rays (packet_set_ray), left in the packet
+    (packet_ray_hit): closest_hit_wide's for each ray, the nodes visited in the order of
+    the least entry distance of the rays that enter them."""
+    row = 0
+    sp = 0
+    while True:
+        node = row // NODE_ROWS
+        children = wchild[node, WCHILD_LEAVES] | wchild[node, WCHILD_INNER]
+        base = sp
+        while children != 0:
+            k = lowest_bit(children)
+            children &= children - 1
+            mask, t_min = box_rays8(wide, row, k, stack)
+            if mask == 0:
+                continue
+            count = wchild[node, WCHILD_COUNT + k]
+            if count > 0:                   # a leaf: its triangles in order
+                group_row = wchild[node, WCHILD_INDEX + k]
+                first = wchild[node, WCHILD_FIRST + k]
+                for j in range(count):
+                    triangle_rays8(wide, group_row + GROUP_ROWS * (j // LANES), j % LANES,
+                                   first + j, stack)
+            else:                           # an inner node: pushed, this node's sorted
+                key = float_bits(t_min)     # (farthest lowest)
+                q = sp
+                while q > base and stack[q - 1] < key:
+                    stack[q] = stack[q - 2]
+                    stack[q + 1] = stack[q - 1]
+                    q -= 2
+                stack[q] = wchild[node, WCHILD_INDEX + k]
+                stack[q + 1] = key
+                sp += 2
+        limit = float_bits(_packet_t_max(stack) * SLAB_SCALE)
+        while sp > 0 and stack[sp - 1] > limit:
+            sp -= 2
+        if sp == 0:
+            return
+        sp -= 2
+        row = stack[sp]
