@@ -411,6 +411,21 @@ def make_kernels(features, target="cpu"):
             camera_packet(px, py, s, n_rays, seed, width, height, scene, stack)
         return lane
 
+    @step
+    def start_sample(px, py, sample_index, seed, width, height, scene, stack, lane):
+        """A camera path's start: (sampler state, camera ray o, d, whether the ray's hit
+        is known, and if so the hit t, tri, b1, b2): lane ``lane`` of the camera packet
+        (next_camera_lane) when it is >= 0 on the CPU, else a camera ray to trace."""
+        state = start_path(py * width + px, sample_index, seed)
+        camera_hit = False
+        if CAMERA_PACKETS:          # (a constant: elsewhere the branch is not compiled)
+            camera_hit = lane >= 0
+        if camera_hit:
+            o, d, t, tri, b1, b2 = packet_ray_hit(stack, lane)
+            return state, o, d, True, t, tri, b1, b2
+        o, d = camera_ray(scene.cam, px, py, state, width, height)
+        return state, o, d, False, INF, -1, ZERO, ZERO
+
     @entry_inlined
     def render_sample(px, py, sample_index, seed, width, height, max_bounces, rr_depth,
                       scene, stack, lane):
@@ -429,15 +444,8 @@ def make_kernels(features, target="cpu"):
 
         ``lane`` >= 0 (on the CPU): the camera ray and its hit are that lane of the packet
         that camera_packet traced (next_camera_lane)."""
-        state = start_path(py * width + px, sample_index, seed)
-        camera_hit = False          # (whether the loop's first trace is the packet's)
-        if CAMERA_PACKETS:          # (a constant: elsewhere the branch is not compiled)
-            camera_hit = lane >= 0
-        if camera_hit:
-            o, d, t_cam, tri_cam, b1_cam, b2_cam = packet_ray_hit(stack, lane)
-        else:
-            o, d = camera_ray(scene.cam, px, py, state, width, height)
-            t_cam, tri_cam, b1_cam, b2_cam = INF, -1, ZERO, ZERO
+        state, o, d, camera_hit, t_cam, tri_cam, b1_cam, b2_cam = start_sample(
+            px, py, sample_index, seed, width, height, scene, stack, lane)
         beta = (ONE, ONE, ONE)      # path throughput: product of f cos / pdf (and 1/q of RR)
         radiance = (ZERO, ZERO, ZERO)
         pdf_prev = ZERO             # solid-angle pdf of the BSDF sample that made this ray;
