@@ -487,8 +487,40 @@ def test_bench_scripts_refuse_bad_arguments_in_one_line():
                  ["bench.throughput", "--cpu", "--scenes", "sun", "--samplers", "halton"],
                  ["bench.throughput", "--cpu", "--processes", "3"],
                  ["bench.throughput", "--scenes", "sun", "--processes", "3"],
-                 ["bench.ab", "throughput", "--trees", ".", ".", "--blocks", "3"]):
+                 ["bench.ab", "throughput", "--trees", ".", ".", "--blocks", "3"],
+                 ["bench.denoise_budget", "--first", "3"]):
         r = subprocess.run([sys.executable, "-m", *args], cwd=ROOT, capture_output=True,
                            text=True, timeout=120)
         assert r.returncode == 2, (args, r.stderr)
         assert "Traceback" not in r.stderr and "error:" in r.stderr, (args, r.stderr)
+
+
+def test_denoise_budget_spends_the_mean_spp_where_the_halves_disagree():
+    """bench.denoise_budget's adaptive split, with a backend that returns known samples
+    (every sample 1, but one pixel's first half 100 and its second 0): exactly spp samples
+    per pixel on average, all the extra ones in the disagreeing pixel and its 3x3
+    neighbours, the other pixels kept at the uniform first samples, and every pixel the
+    plain mean of its own samples."""
+    from types import SimpleNamespace
+    from bench.denoise_budget import adaptive_image, max3x3
+    h, w = 6, 8
+    noisy = (2, 3)
+
+    class Fake:
+        def render_pass(self, start, n, seed, mb, rr, active=None):
+            s = np.arange(start, start + n)
+            out = np.ones((h, w, 3)) * n
+            out[noisy] = 100.0 * (s < 4).sum()
+            if active is not None:
+                out[active == 0] = 0.0
+            return out.astype(np.float32), None
+    scene = SimpleNamespace(height=h, width=w, max_bounces=3, rr_depth=5)
+    img, count = adaptive_image(Fake(), scene, 0, spp=16, first=8, step=4, power=1.0)
+    assert count.sum() == 16 * h * w
+    near = np.zeros((h, w), bool)
+    near[1:4, 2:5] = True
+    assert (count[~near] == 8).all() and (count[near] >= 8 + 4 * 10).all()
+    expect = np.ones((h, w))
+    expect[noisy] = 400.0 / count[noisy]
+    np.testing.assert_allclose(img[..., 0], expect, rtol=1e-6)
+    assert (max3x3(np.eye(3)) == 1).all() and max3x3(np.zeros((2, 2))).max() == 0
