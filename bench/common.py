@@ -63,6 +63,15 @@ def command():
     return "python " + " ".join([script] + sys.argv[1:])
 
 
+def write_record(path, **fields):
+    """A benchmark record as JSON at ``path``: the command, machine, date and versions,
+    then ``fields``."""
+    import json
+    with open(path, "w") as f:
+        json.dump({"command": command(), "machine": machine(), "date": now(),
+                   "versions": versions(), **fields}, f, indent=1)
+
+
 def median_time(fn, repeats):
     """Median wall time of ``fn()`` over ``repeats`` calls (call it once before to warm up)."""
     times = []

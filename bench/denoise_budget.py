@@ -16,12 +16,11 @@ pixel is the plain mean of its samples, and choosing its count from its own firs
 is the usual adaptive sampler's (small) bias.
 """
 import argparse
-import json
 import sys
 
 import numpy as np
 
-from bench.common import command, machine, now, versions
+from bench.common import write_record
 from bench.scenes import CONVERGENCE, convergence_desc, load_reference
 
 
@@ -120,10 +119,7 @@ def main(argv=None):
               f"raw uniform {row['uniform_raw']:.3g}, adaptive {row['adaptive_raw']:.3g}",
               flush=True)
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump({"command": command(), "machine": machine(), "date": now(),
-                       "versions": versions(), "backend": args.backend, "rows": rows}, f,
-                      indent=1)
+        write_record(args.json, backend=args.backend, rows=rows)
     return 0
 
 

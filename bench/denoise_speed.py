@@ -12,13 +12,12 @@ reported apart: it loads the network). Also the relMSE between the two devices' 
 pays: copying the three images in and the result out.
 """
 import argparse
-import json
 import sys
 import time
 
 import numpy as np
 
-from bench.common import command, machine, median_time, now, versions
+from bench.common import median_time, write_record
 from bench.scenes import convergence_desc
 
 
@@ -67,10 +66,7 @@ def main(argv=None):
             print(f"{args.scene} {w}x{h}: relMSE between the GPU's and the CPU's image "
                   f"{diff:.3g}", flush=True)
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump({"command": command(), "machine": machine(), "date": now(),
-                       "versions": versions(), "backend": args.backend, "rows": rows}, f,
-                      indent=1)
+        write_record(args.json, backend=args.backend, rows=rows)
     return 0
 
 
