@@ -7,10 +7,11 @@ For each scene and seed: the raw image at ``--spp`` (uniform) and at ``--high`` 
 adaptive image of the same mean ``--spp``: ``--first`` spp per pixel in two halves, then the
 rest of the budget, (spp - first) x pixels samples, in passes of ``--step`` spp to the
 pixels in proportion to their estimated relMSE to the power ``--power`` (the halves'
-squared difference over the mean's square + 0.01), that estimate first widened to each
-pixel's 3x3 maximum (an edge's neighbours are often as far off as the pixel that shows
-it). The uniform and the adaptive image are denoised (pathtracer.denoise: Open Image
-Denoise, our albedo and normal images). Printed and recorded: the relMSE of each against
+squared difference over the mean's square + 0.01, as pathtracer.progressive.error_estimate
+has it per pixel before its 3x3 mean), that estimate widened to each pixel's 3x3 maximum
+(an edge's neighbours are often as far off as the pixel that shows it). The uniform and
+the adaptive image are denoised (pathtracer.denoise: Open Image Denoise, our albedo and
+normal images). Printed and recorded: the relMSE of each against
 the scene's reference, the mean over the seeds. An experiment, not a renderer mode: each
 pixel is the plain mean of its samples, and choosing its count from its own first samples
 is the usual adaptive sampler's (small) bias.
@@ -33,6 +34,7 @@ def max3x3(a):
 
 def adaptive_image(backend, scene, seed, spp, first, step, power):
     """(image, samples per pixel) of the adaptive split described in the module's text."""
+    from pathtracer.progressive import RELMSE_EPS
     h, w = scene.height, scene.width
     mb, rr = scene.max_bounces, scene.rr_depth
     half = first // 2
@@ -40,7 +42,7 @@ def adaptive_image(backend, scene, seed, spp, first, step, power):
     b = backend.render_pass(half, half, seed, mb, rr)[0].astype(np.float64)
     total = a + b
     mean = total / (2 * half)
-    err = max3x3((((a - b) / (2 * half)) ** 2 / (mean * mean + 0.01)).mean(-1))
+    err = max3x3((((a - b) / (2 * half)) ** 2 / (mean * mean + RELMSE_EPS)).mean(-1))
     passes = (spp - 2 * half) * h * w // step          # passes of `step` spp to hand out
     share = err ** power
     x = share / share.sum() * passes if share.sum() > 0 else np.full((h, w), passes / (h * w))
@@ -74,6 +76,9 @@ def main(argv=None):
     args = p.parse_args(argv)
     if not 2 <= args.first < args.spp or args.first % 2:
         p.error("--first: an even number of spp, at least 2 and below --spp")
+    for name in ("step", "seeds", "high"):
+        if getattr(args, name) < 1:
+            p.error(f"--{name}: at least 1")
     from pathtracer.backends import make_backend
     from pathtracer.denoise import AOV_SPP, denoise, resolve_device
     from pathtracer.film import relmse

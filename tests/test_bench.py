@@ -488,7 +488,9 @@ def test_bench_scripts_refuse_bad_arguments_in_one_line():
                  ["bench.throughput", "--cpu", "--processes", "3"],
                  ["bench.throughput", "--scenes", "sun", "--processes", "3"],
                  ["bench.ab", "throughput", "--trees", ".", ".", "--blocks", "3"],
-                 ["bench.denoise_budget", "--first", "3"]):
+                 ["bench.denoise_budget", "--first", "3"],
+                 ["bench.denoise_budget", "--step", "0"],
+                 ["bench.denoise_budget", "--seeds", "0"]):
         r = subprocess.run([sys.executable, "-m", *args], cwd=ROOT, capture_output=True,
                            text=True, timeout=120)
         assert r.returncode == 2, (args, r.stderr)
