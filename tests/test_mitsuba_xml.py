@@ -296,3 +296,57 @@ def test_fuzzed_mitsuba_xml_loads_or_names_the_error(tmp_path, text):
         assert "\n" not in str(e) and str(e)
         return
     assert scene.width > 0 and scene.n_triangles >= 0
+
+
+# Mitsuba 3.9.1's horizontal field of view (mi.traverse(sensor)["x_fov"]) of a perspective
+# sensor for (its parameters, film width, height): printed by Mitsuba on 2026-12-07, kept
+# here so that CI (without Mitsuba) checks the rule; test_default_fov_matches_mitsuba_live
+# asks Mitsuba itself where it is installed.
+MITSUBA_X_FOV = [
+    ({}, 64, 64, 34.0221), ({}, 64, 32, 42.3117), ({}, 32, 64, 21.9021),
+    ({"focal_length": "35mm"}, 64, 64, 47.2163), ({"focal_length": "35mm"}, 64, 32, 57.8712),
+    ({"focal_length": "35mm"}, 32, 64, 30.9038),
+    ({"fov": 30, "fov_axis": "smaller"}, 64, 32, 56.3736),
+    ({"fov": 30, "fov_axis": "smaller"}, 32, 64, 30.0),
+    ({"fov": 30, "fov_axis": "larger"}, 32, 64, 15.2615),
+    ({"fov": 30, "fov_axis": "diagonal"}, 64, 64, 21.4572),
+    ({"fov": 30, "fov_axis": "diagonal"}, 64, 32, 26.9547),
+    ({"fov": 30, "fov_axis": "y"}, 32, 64, 15.2615),
+]
+
+
+def _sensor_xml(params, width, height):
+    body = "".join(f'<string name="{k}" value="{v}"/>' if isinstance(v, str) else
+                   f'<float name="{k}" value="{v}"/>' for k, v in params.items())
+    return (f'<sensor type="perspective">{body}<transform name="to_world"><lookat '
+            f'origin="0,0,5" target="0,0,0" up="0,1,0"/></transform><film type="hdrfilm">'
+            f'<integer name="width" value="{width}"/><integer name="height" '
+            f'value="{height}"/><rfilter type="box"/></film></sensor>')
+
+
+@pytest.mark.parametrize("params, width, height, x_fov", MITSUBA_X_FOV)
+def test_default_fov_and_focal_length_as_mitsuba(tmp_path, params, width, height, x_fov):
+    """Without fov, Mitsuba's 50 mm lens spans the 35 mm film's diagonal whatever the
+    aspect (34.02 degrees on a square film, not 39.6): the camera sees what Mitsuba's does."""
+    d, _ = convert_file(write(tmp_path, _sensor_xml(params, width, height)))
+    assert d["camera"]["fov"] == pytest.approx(x_fov, abs=1e-3)
+
+
+@pytest.mark.skipif(importlib.util.find_spec("mitsuba") is None, reason="Mitsuba 3 not installed")
+def test_default_fov_matches_mitsuba_live(tmp_path):
+    import mitsuba as mi
+    mi.set_variant("scalar_rgb")
+    for params, width, height, _ in MITSUBA_X_FOV:
+        path = write(tmp_path, _sensor_xml(params, width, height))
+        sensor = mi.load_file(path).sensors()[0]
+        ours = convert_file(path)[0]["camera"]["fov"]
+        x_fov = mi.traverse(sensor)["x_fov"]
+        x_fov = x_fov[0] if hasattr(x_fov, "__len__") else x_fov
+        assert ours == pytest.approx(float(x_fov), abs=1e-3)
+
+
+def test_fov_and_focal_length_together_is_an_error(tmp_path):
+    with pytest.raises(pt.SceneError, match="fov or focal_length"):
+        convert_file(write(tmp_path, _sensor_xml({"fov": 30, "focal_length": "35mm"}, 8, 8)))
+    with pytest.raises(pt.SceneError, match="focal_length"):
+        convert_file(write(tmp_path, _sensor_xml({"focal_length": "wide"}, 8, 8)))

@@ -397,25 +397,7 @@ def _sensor(r, el, out):
     cam["position"] = origin.tolist()
     cam["lookAt"] = (origin + fwd_n).tolist()
     cam["up"] = (up / np.linalg.norm(up)).tolist()
-    if "focal_length" in p:
-        raise r.error("focal_length: give fov (pt-render does not read Mitsuba's "
-                      "focal-length strings)", p["focal_length"][1])
-    # Mitsuba's default: a 50 mm lens on a 36 mm wide film
-    fov = r.get(p, "fov", "float", math.degrees(2 * math.atan(36 / 100)))
-    axis = r.get(p, "fov_axis", "str", "x")
-    t = math.tan(math.radians(fov) / 2)
-    aspect = width / height
-    if axis == "x":
-        tx = t
-    elif axis == "y":
-        tx = t * aspect
-    elif axis in ("smaller", "larger"):
-        on_x = (width <= height) == (axis == "smaller")
-        tx = t if on_x else t * aspect
-    elif axis == "diagonal":
-        tx = t * aspect / math.hypot(aspect, 1.0)
-    else:
-        raise r.error(f"fov_axis {axis!r}: expected x, y, diagonal, smaller or larger", el)
+    tx = _tan_half_fov_x(r, el, p, width / height)
     cam["fov"] = math.degrees(2 * math.atan(tx))
     if kind == "thinlens":
         radius = r.get(p, "aperture_radius", "float", 0.0)
@@ -426,6 +408,48 @@ def _sensor(r, el, out):
             focal = 0.036 / (2 * tx)
             cam["aperture"] = focal / (2 * radius)
             cam["focusDistance"] = focus
+
+
+def _tan_half_fov_x(r, el, p, aspect):
+    """tan(fov_x / 2) of a perspective sensor, by Mitsuba's rule (sensor.h, parse_fov):
+    ``fov`` on ``fov_axis`` (x by default; smaller/larger by the film's aspect), else
+    ``focal_length`` (default "50mm") on the 35 mm film's diagonal (43.27 mm), kept for
+    any aspect ratio: 34.02 degrees horizontally on a square film, 39.6 only on 3:2."""
+    if "fov" in p and "focal_length" in p:
+        raise r.error("give fov or focal_length, not both (as Mitsuba)", el)
+    if "fov" in p:
+        fov = r.get(p, "fov", "float")
+        if not 0 < fov < 180:
+            raise r.error(f"fov {fov:g}: expected degrees in (0, 180)", p["fov"][1])
+        axis = r.get(p, "fov_axis", "str", "x").lower()
+        if axis == "smaller":
+            axis = "y" if aspect > 1 else "x"
+        elif axis == "larger":
+            axis = "x" if aspect > 1 else "y"
+    else:
+        text = r.get(p, "focal_length", "str", "50mm").strip()
+        text = text[:-2] if text.endswith("mm") else text
+        try:
+            focal = float(text)
+        except ValueError:
+            raise r.error(f"focal_length {text!r}: expected millimetres, e.g. \"50mm\"",
+                          p["focal_length"][1]) from None
+        if not (math.isfinite(focal) and focal > 0):
+            raise r.error(f"focal_length {text!r}: expected a positive length",
+                          p["focal_length"][1])
+        if "fov_axis" in p:
+            r.warn("fov_axis ignored: a focal length is on the film's diagonal (as Mitsuba)",
+                   p["fov_axis"][1])
+        fov = math.degrees(2 * math.atan(math.hypot(36.0, 24.0) / (2 * focal)))
+        axis = "diagonal"
+    t = math.tan(math.radians(fov) / 2)
+    if axis == "x":
+        return t
+    if axis == "y":
+        return t * aspect
+    if axis == "diagonal":
+        return t / math.sqrt(1 + 1 / (aspect * aspect))
+    raise r.error(f"fov_axis {axis!r}: expected x, y, diagonal, smaller or larger", el)
 
 
 def _rgb_or_texture(r, el, tag_el):
