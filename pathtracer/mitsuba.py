@@ -109,6 +109,7 @@ def mitsuba_dict(desc, spp=1, sampler="independent"):
     w, h = cam.resolution
     d = {"type": "scene",
          "integrator": {"type": "path", "max_depth": desc.render.max_bounces + 1,
+                        "hide_emitters": desc.render.hide_emitters,
                         "rr_depth": desc.render.rr_depth},
          "sensor": {"type": "perspective", "fov": cam.fov, "fov_axis": "x",
                     "to_world": T().look_at(origin=list(cam.position),

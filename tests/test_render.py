@@ -573,3 +573,51 @@ def test_passes_launched_ahead_grow_as_passes_waited_for(monkeypatch):
     assert b.sizes == [1, 2, 4, 8, 16, 32] and r.film.spp == 63
     assert [p[1] for p in r.passes] == [1, 3, 7, 15, 31, 63]
     assert np.allclose(r.film.image(), 1.0)     # each pass's sums added once, in order
+
+
+@pytest.mark.parametrize("env", ["constant", "map"])
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_hide_emitters_hides_only_what_the_camera_sees_directly(tmp_path, backend, env):
+    """render.hideEmitters (Mitsuba's hide_emitters): the sky and an emissive quad seen
+    directly render black; every other sample is the same path as without it (the same
+    numbers: the same values), so the lit floor and the sky in the mirror are unchanged."""
+    sky = ({"color": [0.5, 1.0, 2.0]} if env == "constant" else
+           {"file": os.path.join(ROOT, "scenes", "assets", "studio_small_03_256.hdr")})
+    s = 4.0
+    quad = [[-s, -1, -s], [s, -1, -s], [s, -1, s], [-s, -1, s]]
+    scene_dict = {
+        "camera": {"resolution": [24, 16], "position": [0, 0.5, 4], "lookAt": [0, 0, 0],
+                   "fov": 70},
+        "render": {"maxBounces": 3},
+        "materials": [{"name": "floor", "type": "diffuse", "albedo": 0.6},
+                      {"name": "lamp", "type": "diffuse", "albedo": 0, "emission": 5,
+                       "twoSided": True},
+                      {"name": "mirror", "metallic": 1, "roughness": 0, "albedo": 1}],
+        "objects": [{"name": "floor", "vertices": quad, "faces": [[0, 2, 1], [0, 3, 2]],
+                     "material": "floor"},
+                    {"name": "lamp", "vertices": [[-2.5, -0.5, 0], [-1.5, -0.5, 0],
+                                                  [-1.5, 0.5, 0], [-2.5, 0.5, 0]],
+                     "faces": [[0, 1, 2], [0, 2, 3]], "material": "lamp"},
+                    {"name": "mirror", "vertices": [[1, -1, -1], [2.5, -1, 0.5],
+                                                    [2.5, 1, 0.5], [1, 1, -1]],
+                     "faces": [[0, 1, 2], [0, 2, 3]], "material": "mirror"}],
+        "environment": sky,
+    }
+    shown = run(load_scene(write_scene(tmp_path, scene_dict)), backend, spp=8).film.image()
+    scene_dict["render"]["hideEmitters"] = True
+    hidden_scene = load_scene(write_scene(tmp_path, scene_dict))
+    assert hidden_scene.features.hide_emitters
+    hidden = run(hidden_scene, backend, spp=8).film.image()
+    # what each pixel's camera rays hit, from a run without bounces (max_bounces 0: only the
+    # emission seen directly) on the visible-emitter scene
+    direct = run(load_scene(write_scene(tmp_path, dict(scene_dict, render={
+        "maxBounces": 0}))), backend, spp=8).film.image()
+    sees_emitter = direct.max(axis=2) > 0
+    assert sees_emitter.sum() >= 40 and (~sees_emitter).sum() >= 40
+    assert np.all(direct[~sees_emitter] == 0)
+    # the emitters the camera sees directly are gone: exactly their direct term
+    np.testing.assert_allclose(hidden, np.maximum(shown - direct, 0), rtol=1e-4, atol=1e-5)
+    # the sky in the mirror and the lit floor stay
+    assert hidden[~sees_emitter].mean() > 0.05
+    zero = run(hidden_scene, backend, spp=4, max_bounces=0).film.image()
+    assert np.all(zero == 0)

@@ -81,6 +81,9 @@ def make_emitters(features, target="cpu"):
     pick_light = last_at_most if target == "cpu" else sample_discrete
     # the sky's searches from guide-table brackets on the CPU only (kernels.envmap)
     ENV_GUIDED = target == "cpu"
+    # render.hideEmitters: a camera ray (the one ray with pdf_prev = 0: every BSDF sample
+    # that continues a path has pdf > 0) sees no emitter, as Mitsuba 3's hide_emitters
+    HIDE = S.hide_emitters
     emitted = surface.emitted
 
     @step
@@ -170,6 +173,9 @@ def make_emitters(features, target="cpu"):
         footprint of the texture lookup (see textures.cone_footprint)."""
         if not emits(mat, m, cos_o):
             return NO_RADIANCE, ZERO, False
+        if HIDE:
+            if not (pdf_prev > ZERO):
+                return NO_RADIANCE, ZERO, False
         pdf_light = ZERO
         if pdf_prev > ZERO:
             pdf_light = tri_light_pdf[tri] * t * t / abs(cos_o)
@@ -188,6 +194,9 @@ def make_emitters(features, target="cpu"):
     def escaped(env, env_img, env_info, d, pdf_prev):
         """(radiance, MIS weight) of the environment seen by a ray leaving the scene along
         d. A constant environment is not sampled by next-event estimation: weight 1."""
+        if HIDE:
+            if not (pdf_prev > ZERO):
+                return NO_RADIANCE, ZERO
         if ENV_MAP:
             # (the radiance and, for MIS, the density from one mapping of d to the map)
             i0, i1, j0, j1, fx, fy, y = env_locate(env_img, env_info, d)
@@ -200,6 +209,9 @@ def make_emitters(features, target="cpu"):
     def escaped_in_cell(env_img, env_info, i0, i1, j0, j1, fx, fy, y, pdf_prev):
         """escaped for an environment map, given the cell its direction reads
         (envmap.env_locate: i0, i1, j0, j1, fx, fy, y)."""
+        if HIDE:
+            if not (pdf_prev > ZERO):
+                return NO_RADIANCE, ZERO
         le, pdf_dir = env_lookup_cell(env_img, i0, i1, j0, j1, fx, fy, y, pdf_prev > ZERO)
         return le, mis_weight_hit(pdf_prev, env_info[ENV_P_SELECT] * pdf_dir)
 

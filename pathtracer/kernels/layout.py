@@ -347,6 +347,10 @@ class Features(NamedTuple):
     flatness: bool = True      # the scene's "subsurface"
     spec_tint: bool = True
     anisotropic: bool = True
+    # emitters seen directly by the camera are not shown (Mitsuba's hide_emitters: camera
+    # rays that escape or reach an emissive surface add nothing; seen in a mirror or through
+    # glass they are)
+    hide_emitters: bool = False
 
 
 class Specialisation(NamedTuple):
@@ -372,6 +376,7 @@ class Specialisation(NamedTuple):
     mipmaps: bool          # trilinear textures: ray-cone footprints for their lookups
     lobes: tuple           # kernels.principled.Lobes: the principled BSDF's parts compiled
     light_tree: bool       # lights picked by the light tree at each shading point
+    hide_emitters: bool    # camera rays see no emitter (render.hideEmitters)
 
 
 def specialise(features):
@@ -390,7 +395,7 @@ def specialise(features):
         wrap_modes=f.wrap_modes and f.textures, mipmaps=f.mipmaps and f.textures,
         lobes=(f.dielectric, f.clearcoat, f.sheen, f.transmission, f.flatness, f.spec_tint,
                f.anisotropic),
-        light_tree=f.light_tree and any_lights)
+        light_tree=f.light_tree and any_lights, hide_emitters=f.hide_emitters)
 
 
 class SceneArrays(NamedTuple):

@@ -166,7 +166,8 @@ def compile_scene(desc, use_cache=True, bvh_options=None, memo=None):
         sobol=desc.render.sampler == "sobol",
         wrap_modes=use_textures and any(p[4] != ("repeat", "repeat") for p in tables.tex_params),
         mipmaps=use_textures and any(p[0] == "trilinear" for p in tables.tex_params),
-        light_tree=tree is not None, **principled_lobes(mat, mat_tex))
+        light_tree=tree is not None, hide_emitters=desc.render.hide_emitters,
+        **principled_lobes(mat, mat_tex))
     cam = camera_array(desc.camera, tri.shift, desc.render.spp)
     if not (np.isfinite(cam).all() and np.abs(cam).max() <= limits.FLOAT32_MAX):
         raise SceneError("the camera's numbers overflow float32 (position, fov, aperture or "

@@ -50,6 +50,7 @@ class RenderSettings:
     light_sampler: str = "auto"   # or "tree", "power" (scene.compile.use_light_tree)
     exposure: float = 0.0      # EV, 8-bit outputs only (pathtracer.tonemap)
     tonemap: str = "clamp"     # or "aces", "agx"
+    hide_emitters: bool = False   # camera rays see no emitter (Mitsuba's hide_emitters)
 
 
 @dataclass
@@ -521,7 +522,8 @@ def _render(n):
         sampler=n.string("sampler", "sobol", choices=SAMPLERS),
         light_sampler=n.string("lightSampler", "auto", choices=LIGHT_SAMPLERS),
         exposure=n.number("exposure", 0.0, lo=-limits.MAX_EXPOSURE, hi=limits.MAX_EXPOSURE),
-        tonemap=n.string("tonemap", "clamp", choices=TONEMAPS))
+        tonemap=n.string("tonemap", "clamp", choices=TONEMAPS),
+        hide_emitters=n.boolean("hideEmitters", False))
     n.finish()
     return r
 

@@ -346,11 +346,15 @@ def _integrator(r, el, render):
             r.warn("max_depth -1 (unbounded) read as 64 bounces", el)
         if "rr_depth" in p:
             render["rrDepth"] = r.get(p, "rr_depth", "int")
+        if r.get(p, "hide_emitters", "bool", False):
+            render["hideEmitters"] = True
         for k in p:
             if k not in ("max_depth", "rr_depth", "hide_emitters"):
                 r.warn(f"integrator parameter {k!r} ignored", el)
     elif kind == "direct":
         render["maxBounces"] = 1
+        if r.get(p, "hide_emitters", "bool", False):
+            render["hideEmitters"] = True
     else:
         raise r.error(f"integrator {kind!r} is not supported (path, volpath, direct)", el)
 
