@@ -13,11 +13,12 @@ import json
 import math
 import os
 import time as _time
+import warnings
 
 import numpy as np
 
 from . import limits
-from .errors import InputError
+from .errors import DarkImageWarning, InputError
 from .scene import SceneError
 from .scene.compile import CompileMemo, compile_scene
 from .scene.loader import SAMPLERS, TONEMAPS, describe, read_scene_data
@@ -415,6 +416,33 @@ class Result:
         return [p for p, _ in pairs]
 
 
+# An image is "black" when 99.9 % of its pixels, exposure applied, stay below this linear
+# value: 1/255, which the 8-bit output shows as at most 13 of 255 (sRGB): a render that
+# looks black or nearly, whatever the few bright pixels (fireflies, a lamp's edge).
+DARK_LEVEL = 1 / 255
+DARK_QUANTILE = 0.999
+
+
+def dark_image(image, features, exposure=0.0):
+    """None, or a one-line explanation of why ``image`` (linear, H x W x 3) came out
+    black or nearly so and what to try: a silent black image misleads (glTF models whose
+    only emitter was a black emissive texture did so until 2026-12)."""
+    level = np.quantile(image.max(axis=2), DARK_QUANTILE) * 2.0 ** exposure
+    if not (level < DARK_LEVEL):      # (a NaN image is reported elsewhere)
+        return None
+    f = features
+    if not (f.tri_lights or f.point_lights or f.environment or f.env_map):
+        return ("the image is black: the scene has no light (no emissive surface, light "
+                "or environment); add one, or --env FILE for an environment map")
+    peak = float(image.max())
+    hidden = " (render.hideEmitters hides the emitters the camera sees)" if getattr(
+        f, "hide_emitters", False) else ""
+    return (f"the image is black or nearly (99.9 % of its pixels below {DARK_LEVEL:.4f}, "
+            f"brightest {peak:.3g}): little light reached the camera{hidden}; check where "
+            "the camera looks and what lights the scene (--env FILE adds an environment "
+            "map), or raise --exposure")
+
+
 def output_files(output, denoised=False, aovs=False):
     """The files one output name stands for, and what each holds ("image", "raw",
     "albedo", "normal"): OUTPUT; a PNG's float twin STEM.exr; with the denoiser the raw
@@ -597,6 +625,10 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
         t0 = _time.perf_counter()
         raw, image = image, run_denoiser(image, aov_images, dn_device)
         denoise_seconds = _time.perf_counter() - t0
+    if film.spp > 0:
+        why = dark_image(film.image(), scene.features, scene.display[0])
+        if why:
+            warnings.warn(why, DarkImageWarning, stacklevel=2)
     seconds = r.seconds
     # (the rates count this render's rays: a resumed film holds earlier ones too)
     new_rays = (film.camera_rays - before[0], film.bounce_rays - before[1],

@@ -23,6 +23,10 @@ class OutputError(Exception):
     """An output file that cannot be written."""
 
 
+class DarkImageWarning(UserWarning):
+    """A finished render whose image is black, or nearly: no light reached the camera."""
+
+
 class Interrupted(KeyboardInterrupt):
     """A stop request (SIGINT, SIGTERM, SIGHUP): the render ends after saving."""
 

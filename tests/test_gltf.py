@@ -204,7 +204,11 @@ def test_camera_and_point_light(tmp_path):
     light, = scene.data["lights"]
     assert np.allclose(light["position"], [0, 3, 0])
     assert np.allclose(light["intensity"], np.array([1, 0.5, 0.25]) * 683 / LUMENS_PER_WATT)
-    assert "environment" not in scene.data        # the file has a light
+    # the lighting rule: the default environment besides the file's lights, unless the
+    # caller says --env none (the file's lights alone)
+    assert scene.data["environment"] == {"color": [1.0, 1.0, 1.0]}
+    assert any("besides its punctual lights" in w for w in scene.warnings)
+    assert "environment" not in pt.load_scene(path, environment="none").data
     # choosing: by name, by index, or framing
     assert pt.load_scene(path, camera="cam").data["camera"] == cam
     auto = pt.load_scene(path, camera="auto").data["camera"]
@@ -407,7 +411,8 @@ def test_gltf_cornell_box_renders_as_the_reference(tmp_path):
     with open(path, "rb") as f, open(os.path.join(ROOT, "scenes", "cornell-box.glb"), "rb") as g:
         assert f.read() == g.read()
     ref = np.load(REFERENCE)
-    scene = pt.load_scene(path)
+    # its lamp alone, as in the reference: --env none (else the default sky adds to it)
+    scene = pt.load_scene(path, environment="none")
     assert not scene.warnings
     scene.set("/camera/resolution", list(ref.shape[1::-1]))
     scene.set("/render", {"maxBounces": 7})
@@ -540,3 +545,37 @@ def test_fuzz_mutated_gltf_files_fail_only_with_scene_errors(tmp_path_factory):
         except SceneError as e:
             assert "\n" not in str(e)
     check()
+
+
+def test_an_emissive_texture_adds_to_the_default_light(tmp_path):
+    """A model whose only emitter is a mostly black emissive texture (DamagedHelmet,
+    WaterBottle) is lit by the default environment too: not a black image. A scene with
+    no light at all renders black with a DarkImageWarning that says why."""
+    from pathtracer.errors import DarkImageWarning
+    b = Builder()
+    emit = np.zeros((4, 4, 3))
+    emit[0, 0] = 255                      # one lit texel of sixteen
+    t = b.image(png(emit), sampler={"magFilter": 9728})
+    mi = b.material({"pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.8, 0.8, 1],
+                                              "metallicFactor": 0},
+                     "emissiveFactor": [1, 1, 1], "emissiveTexture": {"index": t}})
+    b.node(mesh=b.mesh(QUAD_V, QUAD_F, uvs=QUAD_UV * [1, -1] + [0, 1], material=mi))
+    path = b.save(tmp_path / "e.glb")
+    scene = pt.load_scene(path)
+    assert scene.data["environment"] == {"color": [1.0, 1.0, 1.0]}
+    scene.set("/camera/resolution", [16, 12])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DarkImageWarning)
+        img = pt.render(scene, spp=4, backend="cpu").image
+    assert np.median(img) > 0.3            # the quad under the white sky, not black
+    dark = pt.load_scene(path, environment="none")
+    dark.set("/camera/resolution", [16, 12])
+    dark.set("/camera/position", [0, 0, -50])      # behind the one-sided emitter: black
+    with pytest.warns(DarkImageWarning, match="black or nearly"):
+        pt.render(dark, spp=2, backend="cpu")
+    unlit = pt.load_scene({"camera": {"resolution": [8, 8], "position": [0, 0, 3],
+                                      "lookAt": [0, 0, 0]},
+                           "objects": [{"name": "q", "vertices": QUAD_V.tolist(),
+                                        "faces": QUAD_F.tolist()}]})
+    with pytest.warns(DarkImageWarning, match="no light"):
+        pt.render(unlit, spp=1, backend="cpu")

@@ -727,10 +727,19 @@ def convert_file(path, camera=None, environment_given=False):
                          "file": model.path, "smooth": True}]}
     if model.lights:
         data["lights"] = model.lights
-    if not model.lights and not model.emissive and not environment_given:
+    if not environment_given:
+        # The lighting rule: a model is lit by the default environment unless the caller
+        # chooses one (--env FILE) or none (--env none: the file's own lights alone).
+        # Emissive materials and punctual lights add to it, never replace it: a model whose
+        # only emitter is an emissive texture (a helmet's lamps, a bottle's label) would
+        # otherwise render black, as four Khronos sample models did until 2026-12-07.
         data["environment"] = {"color": [1.0, 1.0, 1.0]}
-        warnings.append("no lights in the file: lit by a uniform white environment "
-                        "(--env FILE for an HDRI)")
+        own = [w for w, has in (("punctual lights", model.lights),
+                                ("emissive materials", model.emissive)) if has]
+        warnings.append("lit by a uniform white environment (radiance 1)"
+                        + (f" besides its {' and '.join(own)}" if own else "")
+                        + ": --env FILE for an HDRI"
+                        + (", --env none for its own lights alone" if own else ""))
     return data, warnings
 
 
