@@ -46,8 +46,11 @@ class Builder:
         self.doc["accessors"].append(acc)
         return len(self.doc["accessors"]) - 1
 
-    def mesh(self, positions, indices=None, normals=None, uvs=None, material=None, mode=None):
+    def mesh(self, positions, indices=None, normals=None, uvs=None, material=None, mode=None,
+             colors=None):
         attrs = {"POSITION": self.accessor(np.asarray(positions, np.float32))}
+        if colors is not None:      # COLOR_0 as normalised unsigned bytes (VEC3 or VEC4)
+            attrs["COLOR_0"] = self.accessor(np.asarray(colors, np.uint8), 5121, True)
         if normals is not None:
             attrs["NORMAL"] = self.accessor(np.asarray(normals, np.float32))
         if uvs is not None:

@@ -118,6 +118,7 @@ def make_kernels(features, target="cpu"):
     ANY_ENVIRONMENT = S.any_environment
     NEE = S.nee
     MIPMAPS = S.mipmaps
+    VERTEX_COLORS = S.vertex_colors
     # The CPU traverses the eight-wide BVH (kernels.wide: SIMD box and triangle tests), whose
     # arrays its backend puts in the scene's bvh_box and bvh_child; the GPU the binary one.
     WIDE = target == "cpu"
@@ -143,8 +144,9 @@ def make_kernels(features, target="cpu"):
     surface = make_surface(features, target)
     scatter = make_scatter(features, target)
     emitters = make_emitters(features, target)
-    tri_uv_at, material_at, shading_frame, ray_origin = (
-        surface.tri_uv_at, surface.material_at, surface.shading_frame, surface.ray_origin)
+    tri_uv_at, material_at, tinted, shading_frame, ray_origin = (
+        surface.tri_uv_at, surface.material_at, surface.tinted, surface.shading_frame,
+        surface.ray_origin)
     local_wo, eval_world, sample_world, leave, side_normal, own_skip = (
         scatter.local_wo, scatter.eval_world, scatter.sample_world, scatter.leave,
         scatter.side_normal, scatter.own_skip)
@@ -282,6 +284,8 @@ def make_kernels(features, target="cpu"):
             return o, d, beta, radiance, pdf_prev, skip, bounce, cone, 0, 0, False
         is_principled, params = material_at(scene.mat, scene.mat_tex, scene.tex_data,
                                             scene.tex_int, scene.tex_f, m, tu, tv, fp)
+        if VERTEX_COLORS:
+            params = tinted(params, scene.tri_col, tri, b1, b2)
         ng, ns, tangent, bitangent, wp = shading_frame(
             scene.tri_n, scene.tri_t, scene.mat_tex, scene.tex_data, scene.tex_int,
             scene.tex_f, tri, m, b1, b2, e1, ng, wo, params[P_TRANSMISSION] > ZERO, tu, tv,
@@ -494,6 +498,8 @@ def make_kernels(features, target="cpu"):
                 break
             is_principled, params = material_at(scene.mat, scene.mat_tex, scene.tex_data,
                                                 scene.tex_int, scene.tex_f, m, tu, tv, fp)
+            if VERTEX_COLORS:
+                params = tinted(params, scene.tri_col, tri, b1, b2)
             ng, ns, tangent, bitangent, wp = shading_frame(
                 scene.tri_n, scene.tri_t, scene.mat_tex, scene.tex_data, scene.tex_int,
                 scene.tex_f, tri, m, b1, b2, e1, ng, wo, params[P_TRANSMISSION] > ZERO, tu, tv,
@@ -706,6 +712,8 @@ def make_kernels(features, target="cpu"):
                                              spread)
                 is_principled, params = material_at(scene.mat, scene.mat_tex, scene.tex_data,
                                                     scene.tex_int, scene.tex_f, m, tu, tv, fp)
+                if VERTEX_COLORS:
+                    params = tinted(params, scene.tri_col, tri, b1, b2)
                 # an emitter: its base colour plus its radiance, clamped to [0, 1] as the
                 # sky's is; with the base colour alone a light and the ceiling around it
                 # have one albedo, and the denoiser blurs the light's edge into the ceiling

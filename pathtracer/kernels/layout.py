@@ -53,6 +53,12 @@ TRI_T1 = 3
 TRI_T2 = 6
 TRI_T_SIGN = 9
 TRI_T_WIDTH = 12
+# tri_col, float32 (N, TRI_COL_WIDTH): linear RGB vertex colours of the three vertices,
+# which multiply the base colour (glTF's COLOR_0; vertex colours only)
+TRI_COL0 = 0
+TRI_COL1 = 3
+TRI_COL2 = 6
+TRI_COL_WIDTH = 9
 
 # ---- Materials: mat, float32 (M, MAT_WIDTH); mat_tex, int32 (M, N_SLOTS) ---------------------
 M_ALBEDO = 0          # rgb; for a textured albedo the texture's scale
@@ -351,6 +357,7 @@ class Features(NamedTuple):
     # rays that escape or reach an emissive surface add nothing; seen in a mirror or through
     # glass they are)
     hide_emitters: bool = False
+    vertex_colors: bool = False   # per-vertex colours multiply the base colour (tri_col)
 
 
 class Specialisation(NamedTuple):
@@ -377,6 +384,7 @@ class Specialisation(NamedTuple):
     lobes: tuple           # kernels.principled.Lobes: the principled BSDF's parts compiled
     light_tree: bool       # lights picked by the light tree at each shading point
     hide_emitters: bool    # camera rays see no emitter (render.hideEmitters)
+    vertex_colors: bool    # interpolated vertex colours multiply the base colour
 
 
 def specialise(features):
@@ -395,7 +403,8 @@ def specialise(features):
         wrap_modes=f.wrap_modes and f.textures, mipmaps=f.mipmaps and f.textures,
         lobes=(f.dielectric, f.clearcoat, f.sheen, f.transmission, f.flatness, f.spec_tint,
                f.anisotropic),
-        light_tree=f.light_tree and any_lights, hide_emitters=f.hide_emitters)
+        light_tree=f.light_tree and any_lights, hide_emitters=f.hide_emitters,
+        vertex_colors=f.vertex_colors)
 
 
 class SceneArrays(NamedTuple):
@@ -429,6 +438,7 @@ class SceneArrays(NamedTuple):
     lt_node: np.ndarray        # float32 (L, LT_WIDTH) (light tree only)
     lt_link: np.ndarray        # int32 (L, LT_LINK_WIDTH) (light tree only)
     tri_light_leaf: np.ndarray  # int32 (N,) (light tree only)
+    tri_col: np.ndarray        # float32 (N, TRI_COL_WIDTH) (vertex colours only)
 
 
 @device

@@ -12,13 +12,15 @@ import numpy as np
 
 from .constants import HORIZON_EPS, ONE, OFFSET_REL, TWO, ZERO
 from .device import device, step_marker
-from .layout import (M_ALBEDO, M_ANISOTROPIC, M_CLEARCOAT, M_CLEARCOAT_GLOSS, M_EMISSION,
+from .layout import (P_ANISOTROPIC, P_BASE, P_CLEARCOAT, P_CLEARCOAT_GLOSS, P_ETA,
+                     P_FLATNESS, P_METALLIC, P_ROUGHNESS, P_SHEEN, P_SHEEN_TINT,
+                     P_SPEC_TINT, P_TRANSMISSION, M_ALBEDO, M_ANISOTROPIC, M_CLEARCOAT, M_CLEARCOAT_GLOSS, M_EMISSION,
                      M_ETA, M_METALLIC, M_ROUGHNESS, M_SHEEN, M_SHEEN_TINT, M_SPEC_TINT,
                      M_SPECULAR, M_SUBSURFACE, M_TRANSMISSION, M_TYPE, MAT_PRINCIPLED,
                      T_ALBEDO, T_ANISOTROPIC, T_CLEARCOAT, T_CLEARCOAT_GLOSS,
                      T_EMISSION, T_ETA, T_METALLIC, T_NORMAL, T_ROUGHNESS, T_SHEEN,
                      T_SHEEN_TINT, T_SPEC_TINT, T_SPECULAR, T_SUBSURFACE, T_TRANSMISSION,
-                     TRI_N0, TRI_N1, TRI_N2, TRI_T0, TRI_T1, TRI_T2, TRI_T_SIGN, TRI_UV0,
+                     TRI_COL0, TRI_COL1, TRI_COL2, TRI_N0, TRI_N1, TRI_N2, TRI_T0, TRI_T1, TRI_T2, TRI_T_SIGN, TRI_UV0,
                      TRI_UV1, TRI_UV2, specialise)
 from .normalmap import clamp_mapped_normal, mapped_normal_seeing
 from .textures import make_tex_lookup
@@ -81,6 +83,7 @@ def unit(x):
 class SurfaceSteps(NamedTuple):
     tri_uv_at: object
     material_at: object
+    tinted: object
     emitted: object
     shading_frame: object
     ray_origin: object
@@ -274,5 +277,19 @@ def make_surface(features, target="cpu"):
                                 load3(tri_n, tri, TRI_N1), load3(tri_n, tri, TRI_N2), ng)
         return offset_origin(p, ng)
 
-    return SurfaceSteps(tri_uv_at, material_at, emitted, shading_frame, ray_origin)
+    @step
+    def tinted(params, tri_col, tri, b1, b2):
+        """The parameter tuple with its base colour times the vertex colour interpolated at
+        barycentrics (b1, b2) of triangle tri (glTF: COLOR_0 multiplies the base colour).
+        Called only where the scene has vertex colours (Features.vertex_colors)."""
+        b0 = ONE - b1 - b2
+        c = madd(madd(scale(load3(tri_col, tri, TRI_COL0), b0), load3(tri_col, tri, TRI_COL1),
+                      b1), load3(tri_col, tri, TRI_COL2), b2)
+        return (params[P_BASE] * c[0], params[P_BASE + 1] * c[1], params[P_BASE + 2] * c[2],
+                params[P_ROUGHNESS], params[P_METALLIC], params[P_ETA], params[P_SPEC_TINT],
+                params[P_ANISOTROPIC], params[P_SHEEN], params[P_SHEEN_TINT],
+                params[P_CLEARCOAT], params[P_CLEARCOAT_GLOSS], params[P_FLATNESS],
+                params[P_TRANSMISSION])
+
+    return SurfaceSteps(tri_uv_at, material_at, tinted, emitted, shading_frame, ray_origin)
 

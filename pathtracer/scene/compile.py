@@ -41,7 +41,8 @@ from ..kernels.layout import (CAM_CONE, CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_
                               WRAP_REPEAT, TEX_FIRST, TEX_HEIGHT, TEX_INT_WIDTH, TEX_LEVELS,
                               TEXEL_WIDTH,
                               TEX_OFFSET, TEX_SCALE, TEX_TILE, TEX_WIDTH, TRI_E1, TRI_E2,
-                              TRI_N_WIDTH, TRI_T0, TRI_T_SIGN, TRI_T_WIDTH, TRI_UV_WIDTH, TRI_V0,
+                              TRI_COL_WIDTH, TRI_N_WIDTH, TRI_T0, TRI_T_SIGN, TRI_T_WIDTH, TRI_UV_WIDTH,
+                              TRI_V0,
                               TRI_V_WIDTH, Features, SceneArrays, point_light_ref)
 from ..kernels import layout as L
 from ..accel.light_tree import LightBounds, build_light_tree
@@ -167,6 +168,7 @@ def compile_scene(desc, use_cache=True, bvh_options=None, memo=None):
         wrap_modes=use_textures and any(p[4] != ("repeat", "repeat") for p in tables.tex_params),
         mipmaps=use_textures and any(p[0] == "trilinear" for p in tables.tex_params),
         light_tree=tree is not None, hide_emitters=desc.render.hide_emitters,
+        vertex_colors=tri.has_colors,
         **principled_lobes(mat, mat_tex))
     cam = camera_array(desc.camera, tri.shift, desc.render.spp)
     if not (np.isfinite(cam).all() and np.abs(cam).max() <= limits.FLOAT32_MAX):
@@ -180,7 +182,7 @@ def compile_scene(desc, use_cache=True, bvh_options=None, memo=None):
         bvh_child=tri.bvh.child, tri_uv=tri.tri_uv, tri_t=tri.tri_t, mat_tex=mat_tex,
         tex_data=tex_data, tex_int=tex_int, tex_f=tex_f, env_img=env.img, env_marg=env.marg,
         env_cond=env.cond, env_guide=env.guide, env_info=env.info, lt_node=lt_node,
-        lt_link=lt_link, tri_light_leaf=tri_light_leaf)
+        lt_link=lt_link, tri_light_leaf=tri_light_leaf, tri_col=tri.tri_col)
     w, h = desc.camera.resolution
     r = desc.render
     timings = {"mesh_load": t_mesh,
@@ -495,6 +497,7 @@ class ObjectGeometry(NamedTuple):
     uv: object                   # float64 (F, 3, 2), or None
     materials: np.ndarray        # int32 (F,) material rows
     smooth: bool
+    colors: object = None        # float64 (F, 3, 3) vertex colours (glTF COLOR_0), or None
 
 
 def gather_geometry(desc, tables, mat_index, use_cache=True, memo=None):
@@ -502,18 +505,18 @@ def gather_geometry(desc, tables, mat_index, use_cache=True, memo=None):
     objects = []
     t_mesh = 0.0
     for obj in desc.objects:
-        pos, file_normals, uv, mats, seconds = _object_triangles(obj, desc, tables, mat_index,
-                                                                 use_cache, memo)
+        pos, file_normals, uv, mats, colors, seconds = _object_triangles(
+            obj, desc, tables, mat_index, use_cache, memo)
         t_mesh += seconds
         if memo is None:
-            objects.append(_to_world(obj, desc, pos, file_normals, uv, mats))
+            objects.append(_to_world(obj, desc, pos, file_normals, uv, mats, colors))
             continue
         # the same mesh under the same transform: the same world-space arrays (the
         # materials, cheap, are always taken anew)
         key = ("world", id(pos), obj.matrix.tobytes(), bool(obj.smooth))
         if obj.file is None:
             key += (obj.vertices.tobytes(), obj.faces.tobytes())
-        geo = memo.get(key, lambda: _to_world(obj, desc, pos, file_normals, uv, mats))
+        geo = memo.get(key, lambda: _to_world(obj, desc, pos, file_normals, uv, mats, colors))
         objects.append(geo._replace(materials=mats))
     return objects, t_mesh
 
@@ -521,8 +524,8 @@ def gather_geometry(desc, tables, mat_index, use_cache=True, memo=None):
 def _memo_triangles(memo, objects, use_textures, use_tangents, bvh_options):
     """compile_triangles, or its last result when every object's world-space arrays are
     the same ones and so are the per-face materials: (Triangles, 'built' or 'reused')."""
-    key = ("triangles", tuple((id(o.positions), id(o.normals), id(o.uv), o.smooth)
-                              for o in objects), use_textures, use_tangents,
+    key = ("triangles", tuple((id(o.positions), id(o.normals), id(o.uv), id(o.colors),
+                               o.smooth) for o in objects), use_textures, use_tangents,
            repr(sorted((bvh_options or {}).items())))
     mats = [o.materials for o in objects]
     got = memo.entries.get(key)
@@ -547,7 +550,7 @@ def _object_triangles(obj, desc, tables, mat_index, use_cache, memo=None):
                            lambda: pos)
         mats = np.full(len(pos), mat_index[obj.material] if obj.material is not None
                        else tables.default_material(), np.int32)
-        return pos, None, None, mats, 0.0
+        return pos, None, None, mats, None, 0.0
     t0 = time.perf_counter()
 
     def read():
@@ -578,10 +581,13 @@ def _object_triangles(obj, desc, tables, mat_index, use_cache, memo=None):
                                         f"{where}/file")
         local[-1] = tables.default_material() if (mesh.face_material < 0).any() else 0
         mats = local[mesh.face_material]
-    return pos, file_normals, uv, mats, seconds
+    colors = getattr(mesh, "colors", None)
+    if colors is not None and obj.material is not None:
+        colors = None        # the object's own material replaces the file's (and its colours)
+    return pos, file_normals, uv, mats, colors, seconds
 
 
-def _to_world(obj, desc, pos, file_normals, uv, mats):
+def _to_world(obj, desc, pos, file_normals, uv, mats, colors=None):
     """Transform: positions by M, normals by the inverse transpose; a mirroring transform
     swaps two vertices so that the front side (counter-clockwise) stays the front."""
     where = obj.pointer
@@ -596,6 +602,8 @@ def _to_world(obj, desc, pos, file_normals, uv, mats):
             file_normals = file_normals[:, [0, 2, 1]]
         if uv is not None:
             uv = uv[:, [0, 2, 1]]
+        if colors is not None:
+            colors = colors[:, [0, 2, 1]]
     if not np.isfinite(pos).all() or np.abs(pos).max(initial=0) > limits.MAX_COORDINATE:
         raise SceneError(f"transformed vertex coordinates overflow (|x| <= "
                          f"{limits.MAX_COORDINATE:g})", desc.path, where)
@@ -611,7 +619,8 @@ def _to_world(obj, desc, pos, file_normals, uv, mats):
         vn = safe_normalize(vn, face_n[:, None, :])
     else:
         vn = np.repeat(face_n[:, None, :], 3, axis=1)
-    return ObjectGeometry(pos, vn, uv, mats, bool(obj.smooth))
+    return ObjectGeometry(pos, vn, uv, mats, bool(obj.smooth),
+                          None if colors is None else np.asarray(colors, np.float64))
 
 
 # ---------------------------------------------------------------------------------------
@@ -629,6 +638,8 @@ class Triangles(NamedTuple):
     area: np.ndarray       # float64 (n,)
     n: int
     smooth: bool
+    tri_col: np.ndarray = None   # float32 (n or 1, TRI_COL_WIDTH): vertex colours
+    has_colors: bool = False
 
 
 def compile_triangles(objects, use_textures, use_tangents, bvh_options=None):
@@ -653,6 +664,9 @@ def compile_triangles(objects, use_textures, use_tangents, bvh_options=None):
                for o in objects], (0, 3, 2))
     tan = cat(tangents, (0, 3, 3))
     tsg = cat(tsign, (0, 3))
+    has_colors = any(o.colors is not None for o in objects)
+    cols = cat([o.colors if o.colors is not None else np.ones((len(o.positions), 3, 3))
+                for o in objects], (0, 3, 3)) if has_colors else np.ones((len(pos), 0))
     smooth = any(o.smooth for o in objects)
     # Re-centre the scene on its bounding box (in float64) before rounding to float32: a
     # scene far from the origin keeps the precision of one at the origin, so moving a
@@ -668,7 +682,8 @@ def compile_triangles(objects, use_textures, use_tangents, bvh_options=None):
     t0 = time.perf_counter()
     bvh = build_bvh(pos32, **(bvh_options or {}))
     t_bvh = time.perf_counter() - t0
-    pos32, vn, tmat, uvs, tan, tsg = (a[bvh.order] for a in (pos32, vn, tmat, uvs, tan, tsg))
+    pos32, vn, tmat, uvs, tan, tsg, cols = (a[bvh.order] for a in (pos32, vn, tmat, uvs, tan,
+                                                                   tsg, cols))
     n_tri = len(pos32)
     rows = max(1, n_tri)
 
@@ -693,8 +708,11 @@ def compile_triangles(objects, use_textures, use_tangents, bvh_options=None):
     if use_tangents:
         tri_t[:n_tri, TRI_T0:TRI_T0 + 9] = tan.reshape(n_tri, 9)
         tri_t[:n_tri, TRI_T_SIGN:TRI_T_SIGN + 3] = tsg
+    tri_col = np.ones((rows if has_colors else 1, TRI_COL_WIDTH), np.float32)
+    if has_colors:
+        tri_col[:n_tri] = cols.reshape(n_tri, TRI_COL_WIDTH)
     return Triangles(tri_v, tri_n, tri_uv, tri_t, tri_mat, bvh, t_bvh, shift, area, n_tri,
-                     smooth)
+                     smooth, tri_col, has_colors)
 
 
 # ---------------------------------------------------------------------------------------

@@ -283,9 +283,14 @@ class GltfModel:
                                         for p in parts]) if any(has_uv) else None)
             self.face_material = np.concatenate([np.full(len(p[0]), p[3], np.int32)
                                                  for p in parts])
+            # COLOR_0: white where a primitive has none (the base colour unchanged)
+            self.colors = (np.concatenate([p[4] if p[4] is not None else
+                                           np.ones((len(p[0]), 3, 3), np.float32)
+                                           for p in parts])
+                           if any(p[4] is not None for p in parts) else None)
         else:
             self.positions = np.zeros((0, 3, 3), np.float32)
-            self.normals = self.uvs = None
+            self.normals = self.uvs = self.colors = None
             self.face_material = np.zeros(0, np.int32)
         if not np.isfinite(self.positions).all():
             raise self.error("vertex positions contain NaN or infinity")
@@ -364,13 +369,38 @@ class GltfModel:
                 length = np.linalg.norm(nw, axis=-1, keepdims=True)
                 nw = np.where(length > 0, nw / np.where(length > 0, length, 1), 0.0)
             uvt = uv[tri] if uv is not None else None
+            col = self._vertex_colors(attrs, pw, n)
+            colt = col[tri] if col is not None else None
             if det < 0:       # a mirroring transform: keep the front side counter-clockwise
                 p = p[:, [0, 2, 1]]
                 nw = nw[:, [0, 2, 1]] if nw is not None else None
                 uvt = uvt[:, [0, 2, 1]] if uvt is not None else None
+                colt = colt[:, [0, 2, 1]] if colt is not None else None
             out.append((p.astype(np.float32), None if nw is None else nw.astype(np.float32),
-                        None if uvt is None else uvt.astype(np.float32), mat))
+                        None if uvt is None else uvt.astype(np.float32), mat,
+                        None if colt is None else colt.astype(np.float32)))
         return out
+
+    def _vertex_colors(self, attrs, pw, n):
+        """COLOR_0 (linear RGB, VEC3 or VEC4; float or normalised integers), which the
+        specification multiplies into the base colour; None without it. Its alpha is not
+        read (a warning where it is not 1); other COLOR_n sets are named in a warning."""
+        extra = sorted(k for k in vars(attrs) if k.startswith("COLOR_") and k != "COLOR_0"
+                       and getattr(attrs, k) is not None) if hasattr(attrs, "__dict__") else []
+        if extra:
+            self.warn(f"{pw}: vertex colour sets {', '.join(extra)} are not read (COLOR_0 is)")
+        acc = getattr(attrs, "COLOR_0", None)
+        if acc is None:
+            return None
+        col = self.accessor(acc, pw).astype(np.float64)
+        if col.ndim != 2 or col.shape[1] not in (3, 4) or len(col) != n:
+            raise self.error("COLOR_0 must be VEC3 or VEC4 with one value per vertex",
+                             pw + "/attributes/COLOR_0")
+        if not np.isfinite(col).all():
+            raise self.error("COLOR_0 holds NaN or infinity", pw + "/attributes/COLOR_0")
+        if col.shape[1] == 4 and not np.allclose(col[:, 3], 1.0):
+            self.warn(f"{pw}: COLOR_0's alpha is not read (rendered opaque)")
+        return np.clip(col[:, :3], 0.0, 1.0)
 
     # -- materials
     def _material(self, index, where):
@@ -704,7 +734,7 @@ def load_gltf_mesh(path):
     for w in model.warnings:
         _warnings.warn(f"{path}: {w}", stacklevel=2)
     return ObjMesh(model.positions, model.normals, model.uvs, model.face_material,
-                   model.materials, material_format="scene")
+                   model.materials, material_format="scene", colors=model.colors)
 
 
 # ---------------------------------------------------------------------------------------

@@ -33,6 +33,9 @@ class ObjMesh:
     # "mtl": materials are .mtl dicts (above); "scene": materials in the JSON scene format
     # (glTF files), read as a scene file's
     material_format: str = "mtl"
+    # float32 (F, 3, 3) linear RGB vertex colours that multiply the base colour (glTF's
+    # COLOR_0), or None
+    colors: Optional[np.ndarray] = None
 
 
 def cache_dir():
