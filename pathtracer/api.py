@@ -254,7 +254,7 @@ def _split_backend(compiled, name, split):
 
 
 def load_scene(source, allow_missing=False, base=None, camera=None, environment=None,
-               _overrides=None, _check=None):
+               params=None, _overrides=None, _check=None):
     """A :class:`Scene` from a scene file's path (JSON, a glTF 2.0 model ``.gltf``/``.glb``,
     a Mitsuba 3 XML scene, or a thesis renderer scene folder) or from a dict in the JSON
     format (validated alike; relative file names in a dict are read from ``base``, by
@@ -266,6 +266,8 @@ def load_scene(source, allow_missing=False, base=None, camera=None, environment=
     of camera keys (``{"position": ..., "lookAt": ...}``) that replace the scene's.
     ``environment``: an environment map's path (or a dict of the format's environment
     keys) that replaces the scene's environment, or "none" to remove it.
+    ``params``: a Mitsuba 3 XML scene's parameters, ``{"spp": 64}`` for its ``$spp``
+    (over its ``<default>`` values; Mitsuba's and pt-render's ``-D spp=64``).
 
     (``_overrides``: resolution, sampler, light_sampler, exposure or tonemap that replace
     the scene's, as the CLI's flags; ``_check(description)``: a test run before compiling, such as the
@@ -282,8 +284,11 @@ def load_scene(source, allow_missing=False, base=None, camera=None, environment=
         raise SceneError(f"camera {pick!r}: choosing a camera by name or index is for glTF "
                          "files; other scenes take a position (--camera X,Y,Z[:X,Y,Z], or "
                          "a dict of camera keys in Python)", source)
+    if params and not source.lower().endswith(".xml"):
+        raise SceneError("params (-D NAME=VALUE) are for Mitsuba XML scenes", source)
     data, path, warnings = read_scene_data(source, allow_missing, camera=pick,
-                                           environment_given=environment is not None)
+                                           environment_given=environment is not None,
+                                           params=params)
     data = _with_view(data, None if pick is not None else camera, environment, path)
     return Scene(data, path, warnings=warnings, _overrides=_overrides, _check=_check)
 

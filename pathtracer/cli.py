@@ -122,6 +122,14 @@ def _camera(text):
     return text
 
 
+def _define(text):
+    """NAME=VALUE of -D, as a (name, value) pair."""
+    name, eq, value = text.partition("=")
+    if not eq or not name.strip().replace("_", "a").isalnum():
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    return name.strip(), value
+
+
 def build_parser():
     p = Parser(
         prog="pt-render",
@@ -173,6 +181,10 @@ def build_parser():
                         "at) for any scene; for a glTF model also one of its cameras by index "
                         "or name, or 'auto' (framing the model: the default when the file has "
                         "no camera)")
+    p.add_argument("-D", "--define", action="append", type=_define, metavar="NAME=VALUE",
+                   default=[],
+                   help="a Mitsuba XML scene's parameter: sets $NAME over its <default> "
+                        "(as Mitsuba's -D; repeat for several)")
     p.add_argument("--env", metavar="FILE",
                    help="light the scene with this environment map (.hdr, .exr, ...) instead "
                         "of its own environment ('none': no environment)")
@@ -538,7 +550,7 @@ def _render(args, scene_path, signals):
     from .memory import check_film
     t0 = time.perf_counter()
     scene = load_scene(scene_path, allow_missing=args.allow_missing, camera=args.camera,
-                       environment=args.env,
+                       environment=args.env, params=dict(args.define) or None,
                        _overrides={"resolution": args.resolution, "sampler": args.sampler,
                                    "light_sampler": args.light_sampler,
                                    "exposure": args.exposure, "tonemap": args.tonemap},

@@ -555,7 +555,7 @@ def _object_triangles(obj, desc, tables, mat_index, use_cache, memo=None):
 
     def read():
         try:
-            mesh = load_mesh(obj.file, use_cache=use_cache)
+            mesh = load_mesh(obj.file, use_cache=use_cache, shape_index=obj.shape_index)
         except SceneError as e:
             if e.pointer or e.file != obj.file:
                 raise
@@ -565,7 +565,7 @@ def _object_triangles(obj, desc, tables, mat_index, use_cache, memo=None):
                 mesh.normals.astype(np.float64) if mesh.normals is not None else None,
                 mesh.uvs.astype(np.float64) if mesh.uvs is not None else None)
     mesh, pos, file_normals, uv = read() if memo is None else memo.get(
-        ("mesh", file_key(obj.file), use_cache), read)
+        ("mesh", file_key(obj.file), obj.shape_index, use_cache), read)
     seconds = time.perf_counter() - t0
     if obj.material is not None:
         mats = np.full(len(pos), mat_index[obj.material], np.int32)

@@ -97,6 +97,7 @@ class Object:
     matrix: np.ndarray = field(default_factory=lambda: np.eye(4))
     smooth: bool = False
     pointer: str = ""
+    shape_index: int = 0      # which mesh of a Mitsuba .serialized file
 
 
 @dataclass
@@ -350,10 +351,12 @@ def _strict_json(path):
         raise SceneError(f"invalid JSON{where}: {e}", path) from None
 
 
-def read_scene_data(path, allow_missing=False, camera=None, environment_given=False):
+def read_scene_data(path, allow_missing=False, camera=None, environment_given=False,
+                    params=None):
     """(parsed JSON in this format, the scene file's absolute path, warnings) of a scene
     file, a Mitsuba 3 XML scene, a glTF 2.0 model or a thesis renderer's scene folder
-    (converted); not yet validated. ``camera``: which of a glTF file's cameras;
+    (converted); not yet validated. ``params``: a Mitsuba scene's ``$name`` parameters
+    ({name: value}, over its ``<default>`` values). ``camera``: which of a glTF file's cameras;
     ``environment_given``: a glTF file gets no default environment (see
     :func:`.gltf.convert_file`)."""
     from .thesis import convert, is_thesis_folder, is_thesis_scene_file
@@ -364,7 +367,7 @@ def read_scene_data(path, allow_missing=False, camera=None, environment_given=Fa
         return data, path, warnings
     if path.lower().endswith(".xml") and not os.path.isdir(path):
         from .mitsuba_xml import convert_file
-        data, warnings = convert_file(path)
+        data, warnings = convert_file(path, params)
         return data, path, warnings
     if os.path.isdir(path) or is_thesis_scene_file(path):
         folder = path if os.path.isdir(path) else os.path.dirname(path)
@@ -662,9 +665,12 @@ def _object(n, base, materials):
         if not os.path.isfile(obj.file):
             raise n.error(f"file not found: {obj.file}", "file")
         ext = os.path.splitext(obj.file)[1].lower()
-        if ext not in (".obj", ".ply", ".gltf", ".glb"):
+        if ext not in (".obj", ".ply", ".gltf", ".glb", ".serialized"):
             raise n.error(f"unsupported mesh format {ext!r}: this version reads OBJ (.obj), "
-                          "PLY (.ply) and glTF 2.0 (.gltf, .glb)", "file")
+                          "PLY (.ply), glTF 2.0 (.gltf, .glb) and Mitsuba's .serialized",
+                          "file")
+        if ext == ".serialized":
+            obj.shape_index = n.integer("shapeIndex", 0, lo=0, hi=2 ** 31 - 1)
     elif n.has("vertices") and n.has("faces"):
         obj.vertices = _array(n, "vertices", float, 3)
         obj.faces = _array(n, "faces", int, 3)

@@ -66,12 +66,15 @@ MESH_FORMATS = (".obj", ".ply", ".gltf", ".glb")
 PLY_UV_NAMES = (("s", "t"), ("u", "v"), ("texture_u", "texture_v"), ("texture_s", "texture_t"))
 
 
-def load_mesh(path, use_cache=True):
+def load_mesh(path, use_cache=True, shape_index=0):
     """Triangles (and, for OBJ and glTF, materials) of the mesh file at ``path`` by its
-    extension."""
+    extension (``shape_index``: which mesh of a Mitsuba .serialized file)."""
     ext = os.path.splitext(path)[1].lower()
     if ext == ".ply":
         return load_ply(path)
+    if ext == ".serialized":
+        from .serialized import load_serialized
+        return load_serialized(path, shape_index)
     if ext in (".gltf", ".glb"):
         from .gltf import load_gltf_mesh
         return load_gltf_mesh(path)

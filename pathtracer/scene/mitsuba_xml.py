@@ -33,7 +33,22 @@ class _Reader:
         self.defaults = {}
         self.warnings = []
         self.bsdfs = {}        # id -> element
+        self.emitters = {}     # id -> top-level <emitter> element
         self.where = {}        # element -> "/scene/shape[3] (id=light)"
+        self.search = []       # <path value>: folders searched for files, latest first
+
+    def file(self, name):
+        """A file name as Mitsuba's file resolver finds it: absolute, or relative to the
+        folders of the scene's ``<path>`` elements (the latest first), then to the scene's
+        folder. A name found nowhere is returned as given (resolved against the scene's
+        folder later, whose error names it)."""
+        if os.path.isabs(name):
+            return name
+        for folder in self.search + [self.base]:
+            candidate = os.path.join(folder, name)
+            if os.path.exists(candidate):
+                return candidate
+        return name
 
     def error(self, message, el=None):
         return SceneError(message, self.path, self.where.get(el, "/scene") if el is not None
@@ -211,8 +226,10 @@ def _look_at(origin, target, up):
     return m
 
 
-def convert_file(path):
-    """(scene dict in the JSON format, warnings) of the Mitsuba 3 XML file at ``path``."""
+def convert_file(path, params=None):
+    """(scene dict in the JSON format, warnings) of the Mitsuba 3 XML file at ``path``.
+    ``params``: {name: value} that set the scene's ``$name`` parameters over its
+    ``<default>`` values (Mitsuba's ``-D name=value``)."""
     try:
         tree = ET.parse(path)
     except FileNotFoundError:
@@ -232,6 +249,7 @@ def convert_file(path):
     if not version.startswith("3"):
         r.warn(f"scene version {version or '(none)'}: read as Mitsuba 3 XML")
     _index(r, root, "/scene")
+    r.defaults.update({str(k): str(v) for k, v in (params or {}).items()})
     _expand_includes(r, root, 0)
     for el in root:
         if el.tag == "default":
@@ -239,6 +257,14 @@ def convert_file(path):
             if not name:
                 raise r.error("<default> without a name", el)
             r.defaults.setdefault(name, el.get("value", ""))
+    _substitute(r, root)
+    for el in root:
+        if el.tag == "path":
+            folder = el.get("value")
+            if not folder:
+                raise r.error("<path> without a value", el)
+            r.search.insert(0, folder if os.path.isabs(folder) else
+                            os.path.join(r.base, folder))
     out = {"camera": {}, "render": {}, "materials": [], "objects": []}
     materials = {}     # bsdf id or element -> material name
     for el in root:
@@ -247,10 +273,12 @@ def convert_file(path):
             if not bid:
                 raise r.error("a top-level <bsdf> needs an id", el)
             r.bsdfs[bid] = el
+        elif el.tag == "emitter" and el.get("id"):
+            r.emitters[el.get("id")] = el
     have_sensor = False
     for el in root:
         tag = el.tag
-        if tag in ("default", "bsdf"):
+        if tag in ("default", "bsdf", "path"):
             continue
         if tag == "integrator":
             _integrator(r, el, out["render"])
@@ -263,6 +291,8 @@ def convert_file(path):
         elif tag == "shape":
             _shape(r, el, out, materials)
         elif tag == "emitter":
+            if el.get("type") == "area" and el.get("id"):
+                continue        # a shape's emitter, declared here and used by <ref>
             _emitter(r, el, out)
         elif tag in ("texture",):
             r.warn("a top-level <texture> is only used through a <ref>", el)
@@ -313,6 +343,18 @@ def _expand_includes(r, el, depth):
         _expand_includes(r, sub, depth + 1)
         el[i:i + 1] = list(sub)
         i += len(sub)
+
+
+def _substitute(r, el):
+    """``$name`` replaced by its parameter in every attribute below ``el`` (types, ids and
+    names too: Bitterli's exports write ``<integrator type="$integrator">``), as Mitsuba's
+    parser does; a name without a value is an error naming it."""
+    for child in el.iter():
+        if child is el or child.tag == "default":
+            continue
+        for k, v in child.attrib.items():
+            if "$" in v:
+                child.set(k, r.attr(child, k))
 
 
 def _index(r, el, where):
@@ -465,7 +507,7 @@ def _rgb_or_texture(r, el, tag_el):
         tp = r.params(v)
         if "filename" not in tp:
             raise r.error("bitmap without a filename", v)
-        spec = {"texture": r.get(tp, "filename", "str")}
+        spec = {"texture": r.file(r.get(tp, "filename", "str"))}
         raw = r.get(tp, "raw", "bool", False)
         spec["colorSpace"] = "linear" if raw else "sRGB"
         # Mitsuba 3 has no mip-maps: its bitmaps are filtered bilinearly (or nearest)
@@ -609,12 +651,20 @@ def _shape(r, el, out, materials):
     p = r.params(el)
     obj = {"name": _shape_name(el, out)}
     m = r.transform(p["to_world"][1]) if "to_world" in p else np.eye(4)
-    if kind in ("obj", "ply"):
+    if kind in ("obj", "ply", "serialized"):
         if "filename" not in p:
             raise r.error(f"{kind} shape without a filename", el)
-        obj["file"] = r.get(p, "filename", "str")
+        obj["file"] = r.file(r.get(p, "filename", "str"))
         face_normals = r.get(p, "face_normals", "bool", False)
         obj["smooth"] = not face_normals
+        if kind == "serialized":
+            if not obj["file"].lower().endswith(".serialized"):
+                raise r.error("a serialized shape's file must end in .serialized", el)
+            index = r.get(p, "shape_index", "int", 0)
+            if index < 0:
+                raise r.error(f"shape_index {index}: must be >= 0", p["shape_index"][1])
+            if index:
+                obj["shapeIndex"] = index
     elif kind == "rectangle":
         obj["vertices"] = [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]
         obj["faces"] = [[0, 1, 2], [0, 2, 3]]
@@ -633,10 +683,12 @@ def _shape(r, el, out, materials):
         m = m @ local
         r.warn("sphere tessellated into 16,128 triangles (smooth normals)", el)
     else:
-        raise r.error(f"shape {kind!r} is not supported (obj, ply, rectangle, cube, sphere)",
+        raise r.error(f"shape {kind!r} is not supported (obj, ply, serialized, rectangle, "
+                      "cube, sphere)",
                       el)
     for k in p:
-        if k not in ("filename", "face_normals", "to_world", "radius", "center"):
+        if k not in ("filename", "face_normals", "to_world", "radius", "center",
+                     "shape_index"):
             if k == "flip_normals":
                 raise r.error("flip_normals is not supported", p[k][1])
             r.warn(f"shape parameter {k!r} ignored", p[k][1])
@@ -645,6 +697,8 @@ def _shape(r, el, out, materials):
     bsdf_el = None
     emitter = None
     for child in el:
+        if child.tag == "ref" and child.get("id") in r.emitters:
+            child = r.emitters[child.get("id")]      # an emitter declared at the top level
         if child.tag in ("bsdf", "ref"):
             bsdf_el = _deref(r, child)
         elif child.tag == "emitter":
@@ -742,7 +796,7 @@ def _emitter(r, el, out):
             raise r.error("more than one environment emitter", el)
         if "filename" not in p:
             raise r.error("envmap without a filename", el)
-        env = {"file": r.get(p, "filename", "str")}
+        env = {"file": r.file(r.get(p, "filename", "str"))}
         if "scale" in p:
             env["intensity"] = r.get(p, "scale", "float")
         m = r.transform(p["to_world"][1]) if "to_world" in p else np.eye(4)
