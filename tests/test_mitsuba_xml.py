@@ -197,8 +197,6 @@ def test_unsupported_elements_are_named(tmp_path, body, message):
 def test_bad_files(tmp_path):
     with pytest.raises(pt.SceneError, match="invalid XML"):
         convert_file(write(tmp_path, "<shape"))
-    with pytest.raises(pt.SceneError, match="no <sensor>"):
-        convert_file(write(tmp_path, '<shape type="cube"/>'))
     bad = tmp_path / "other.xml"
     bad.write_text("<html/>")
     with pytest.raises(pt.SceneError, match="expected a Mitsuba <scene>"):
@@ -350,3 +348,103 @@ def test_fov_and_focal_length_together_is_an_error(tmp_path):
         convert_file(write(tmp_path, _sensor_xml({"fov": 30, "focal_length": "35mm"}, 8, 8)))
     with pytest.raises(pt.SceneError, match="focal_length"):
         convert_file(write(tmp_path, _sensor_xml({"focal_length": "wide"}, 8, 8)))
+
+
+def test_a_scene_without_a_sensor_gets_mitsubas_default_camera(tmp_path):
+    """Mitsuba's Scene adds a 45-degree camera looking along +Z from in front of the scene's
+    bounding box when a file has no sensor (include fragments often have none)."""
+    d, warnings = convert_file(write(tmp_path, '<shape type="cube"><transform name="to_world">'
+                                     '<translate x="1" z="2"/></transform></shape>'))
+    distance = 2 / (2 * math.tan(math.radians(22.5)))
+    cam = d["camera"]
+    assert cam["fov"] == 45 and cam["resolution"] == [768, 576]
+    assert np.allclose(cam["position"], [1, 0, 1 - distance])
+    assert np.allclose(np.subtract(cam["lookAt"], cam["position"]), [0, 0, 1])
+    assert any("default camera" in w for w in warnings)
+
+
+def test_rectangle_and_sphere_texture_coordinates_as_mitsubas(tmp_path):
+    """Mitsuba's rectangle has (u, v) = ((x + 1) / 2, (y + 1) / 2) and its sphere u = phi /
+    2 pi, v = theta / pi about local +Z; this format's v is 1 - Mitsuba's."""
+    d, _ = convert_file(write(tmp_path, SENSOR + '<shape type="rectangle"/><shape '
+                              'type="sphere"/>'))
+    rect, sphere = d["objects"]
+    for (x, y, _), (u, v) in zip(rect["vertices"], rect["uvs"]):
+        assert (u, 1 - v) == ((x + 1) / 2, (y + 1) / 2)
+    p, uv = np.array(sphere["vertices"]), np.array(sphere["uvs"])
+    theta = np.arccos(np.clip(p[:, 2], -1, 1))
+    assert np.allclose(1 - uv[:, 1], theta / np.pi)
+    phi = np.arctan2(p[:, 1], p[:, 0]) % (2 * np.pi)
+    ring = np.sin(theta) > 1e-6
+    assert np.allclose(np.cos(phi[ring] - 2 * np.pi * uv[ring, 0]), 1)
+
+
+def test_checkerboard_is_mitsubas_pattern(tmp_path):
+    """A checkerboard texture is a 2 x 2 image looked up nearest: color0 where frac(u) and
+    frac(v) are on the same side of 1/2; its to_uv scale tiles it."""
+    body = SENSOR + """<bsdf type="diffuse" id="b"><texture type="checkerboard" name="reflectance">
+      <rgb name="color0" value="0.1 0.2 0.3"/><rgb name="color1" value="0.9"/>
+      <transform name="to_uv"><scale x="4" y="2"/></transform></texture></bsdf>
+      <shape type="rectangle"><ref id="b"/></shape>"""
+    d, _ = convert_file(write(tmp_path, body))
+    tex = d["materials"][0]["albedo"]
+    img = np.load(tex["texture"])
+    assert img.shape == (2, 2, 3) and np.allclose(img[0, 0], [0.1, 0.2, 0.3])
+    assert np.allclose(img[0, 1], 0.9) and np.allclose(img[1, 1], img[0, 0])
+    assert tex["filter"] == "nearest" and tex["colorSpace"] == "linear"
+    assert tex["tile"] == [4, 2] and tex["offset"] == [0, 1 - 2]
+
+
+# What Mitsuba 3.9.1's scalar_rgb variant makes of the spectra of its own Cornell box
+# (../shared/realworld/mi_cbox/cbox.xml: reflectances by wavelength and the lamp's
+# radiance), read back from its BSDFs and emitter on 2026-12-07.
+MITSUBA_CBOX_RGB = {"red": [0.49132, 0.049228, 0.050922], "box": [0.735013, 0.735625, 0.736264],
+                    "green": [0.068283, 0.39776, 0.086291], "light": [0.776367, 0.77981, 0.776029],
+                    "emission": [20.71084, 10.85463, 2.77115]}
+
+
+@needs_shared
+def test_spectra_become_the_colours_mitsubas_rgb_mode_makes():
+    path = os.path.join(os.path.dirname(ROOT), "shared", "realworld", "mi_cbox", "cbox.xml")
+    d, _ = convert_file(path)
+    mats = {m["name"]: m for m in d["materials"]}
+    for name in ("red", "box", "green", "light"):
+        assert np.allclose(mats[name]["albedo"], MITSUBA_CBOX_RGB[name], rtol=1e-4, atol=1e-5)
+    lamp, = [m for m in d["materials"] if "emission" in m]
+    assert np.allclose(lamp["emission"], MITSUBA_CBOX_RGB["emission"], rtol=1e-4)
+
+
+def test_uniform_spectrum_of_an_emitter_is_mitsubas_white(tmp_path):
+    """<spectrum value="2"> is grey for a reflectance but 2 x xyz_to_srgb(1, 1, 1) =
+    (2.41, 1.90, 1.82) for an emitter in Mitsuba's RGB variants (its spectral white)."""
+    body = SENSOR + """<emitter type="constant"><spectrum name="radiance" value="2"/></emitter>
+      <shape type="rectangle"><bsdf type="diffuse"><spectrum name="reflectance" value="0.5"/></bsdf>
+      </shape>
+      <shape type="rectangle"><transform name="to_world"><translate z="-2"/></transform>
+      <bsdf type="diffuse"><spectrum name="reflectance" filename="refl.spd"/></bsdf></shape>"""
+    (tmp_path / "refl.spd").write_text("# a flat spectrum\n400 0.3\n700 0.3\n")
+    d, _ = convert_file(write(tmp_path, body))
+    assert np.allclose(d["environment"]["color"], [2.40959, 1.89658, 1.81783], rtol=1e-4)
+    assert d["materials"][0]["albedo"] == [0.5] * 3
+    # a flat 400-700 nm reflectance: grey up to the D65-weighted tails outside it
+    assert np.allclose(d["materials"][1]["albedo"], 0.3, rtol=0.01)
+    bad = SENSOR + '<shape type="cube"><bsdf type="diffuse"><spectrum name="reflectance" ' \
+                   'value="500:0.5, 400:0.2"/></bsdf></shape>'
+    with pytest.raises(pt.SceneError, match="increasing wavelengths"):
+        convert_file(write(tmp_path, bad))
+
+
+@pytest.mark.skipif(importlib.util.find_spec("mitsuba") is None, reason="Mitsuba 3 not installed")
+def test_spectrum_conversion_matches_mitsubas_own():
+    import mitsuba as mi
+    from pathtracer.scene.spectra import spectrum_to_rgb
+    mi.set_variant("scalar_rgb")
+    rng = np.random.default_rng(3)
+    for k in range(50):
+        n = int(rng.integers(2, 30))
+        w = np.sort(rng.uniform(300, 900, n))
+        v = rng.uniform(0, 0.6, n)
+        for emitter in (False, True):
+            theirs = np.array(mi.spectrum_list_to_srgb(w.tolist(), v.tolist(), not emitter,
+                                                       not emitter))
+            assert np.allclose(spectrum_to_rgb(w, v, emitter), theirs, rtol=1e-4, atol=1e-6)

@@ -515,7 +515,8 @@ def gather_geometry(desc, tables, mat_index, use_cache=True, memo=None):
         # materials, cheap, are always taken anew)
         key = ("world", id(pos), obj.matrix.tobytes(), bool(obj.smooth))
         if obj.file is None:
-            key += (obj.vertices.tobytes(), obj.faces.tobytes())
+            key += (obj.vertices.tobytes(), obj.faces.tobytes(),
+                    None if obj.uvs is None else obj.uvs.tobytes())
         geo = memo.get(key, lambda: _to_world(obj, desc, pos, file_normals, uv, mats, colors))
         objects.append(geo._replace(materials=mats))
     return objects, t_mesh
@@ -550,7 +551,8 @@ def _object_triangles(obj, desc, tables, mat_index, use_cache, memo=None):
                            lambda: pos)
         mats = np.full(len(pos), mat_index[obj.material] if obj.material is not None
                        else tables.default_material(), np.int32)
-        return pos, None, None, mats, None, 0.0
+        uv = obj.uvs[obj.faces] if obj.uvs is not None else None
+        return pos, None, uv, mats, None, 0.0
     t0 = time.perf_counter()
 
     def read():

@@ -67,6 +67,8 @@ def uv_sphere(n_theta, n_phi, radius=1.0, seam=False):
         p = 2 * np.pi * np.arange(n_phi + 1) / n_phi
         tt, pp = np.meshgrid(t, p, indexing="ij")
         unit = np.stack([np.sin(tt) * np.cos(pp), np.cos(tt), -np.sin(tt) * np.sin(pp)], -1)
+        unit[:, -1] = unit[:, 0]     # the seam's columns the same points (welded normals)
+        unit[0, :], unit[-1, :] = unit[0, 0], unit[-1, 0]     # and each pole one point
         uvs = np.stack([pp / (2 * np.pi), 1 - tt / np.pi], -1).reshape(-1, 2)
         faces = []
         for i in range(n_theta):

@@ -591,7 +591,7 @@ class GltfModel:
         suffix = IMAGE_TYPES.get(mime)
         if suffix is None:
             raise self.error(f"image type {mime or '(none)'} not supported (PNG or JPEG)", iw)
-        return _cached_image(data, suffix)
+        return cached_file(data, suffix)
 
     # -- cameras and lights
     def _camera(self, node, world, where):
@@ -692,11 +692,13 @@ def _face_normals(p):
     return np.where(length > 0, n / np.where(length > 0, length, 1), [0.0, 0.0, 1.0])
 
 
-def _cached_image(data, suffix):
+def cached_file(data, suffix, kind="gltf-images"):
+    """The path of a file in the cache folder ``kind`` holding ``data`` (named by its
+    content, written once): embedded glTF images, Mitsuba's procedural textures."""
     from .._cache import cache_root
     name = hashlib.sha256(data).hexdigest()[:32] + suffix
-    for folder in (os.path.join(cache_root(), "gltf-images"),
-                   os.path.join(tempfile.gettempdir(), "pt-render-gltf-images")):
+    for folder in (os.path.join(cache_root(), kind),
+                   os.path.join(tempfile.gettempdir(), "pt-render-" + kind)):
         path = os.path.join(folder, name)
         if os.path.isfile(path):
             return path
@@ -709,7 +711,7 @@ def _cached_image(data, suffix):
             return path
         except OSError:
             continue
-    raise SceneError("cannot write the glTF file's embedded image to a cache folder")
+    raise SceneError(f"cannot write a generated image ({kind}) to a cache folder")
 
 
 @functools.lru_cache(maxsize=4)

@@ -93,6 +93,7 @@ class Object:
     file: Optional[str] = None
     vertices: Optional[np.ndarray] = None   # float64 (V, 3), inline meshes
     faces: Optional[np.ndarray] = None      # int64 (F, 3), inline meshes
+    uvs: Optional[np.ndarray] = None        # float64 (V, 2), inline meshes' "uvs"
     material: Optional[str] = None
     matrix: np.ndarray = field(default_factory=lambda: np.eye(4))
     smooth: bool = False
@@ -680,6 +681,15 @@ def _object(n, base, materials):
             i, j = bad[0]
             raise SceneError(f"vertex index {obj.faces[i, j]} out of range (0..{nv - 1})",
                              n.file, f"{n.path('faces')}/{i}/{j}")
+        if n.has("uvs"):
+            obj.uvs = _array(n, "uvs", float, 2)
+            if len(obj.uvs) != nv:
+                raise n.error(f"expected one [u, v] per vertex ({nv}), got {len(obj.uvs)}",
+                              "uvs")
+            if not (np.isfinite(obj.uvs).all() and
+                    np.abs(obj.uvs).max(initial=0) <= limits.MAX_UV):
+                raise n.error(f"texture coordinates must be finite and within "
+                              f"+-{limits.MAX_UV:g}", "uvs")
     else:
         raise n.error("needs 'file', or 'vertices' and 'faces'")
     obj.material = n.string("material", None)

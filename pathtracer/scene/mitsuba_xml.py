@@ -7,6 +7,7 @@ substituted for ``$name`` in attribute values; ``<ref id>`` (``<ref name="bsdf" 
 names a BSDF declared at the top level. Anything outside the subset is a SceneError naming
 the element, never silently dropped; approximations give a warning.
 """
+import io
 import math
 import os
 import re
@@ -15,6 +16,8 @@ import xml.etree.ElementTree as ET
 import numpy as np
 
 from .errors import SceneError
+from .spectra import spectrum_to_rgb, uniform_to_rgb
+from .gltf import cached_file
 
 # principled parameters: Mitsuba name -> scene-format key (kernels.layout's parameter table)
 from ..kernels.layout import MATERIAL_PARAMS
@@ -34,8 +37,10 @@ class _Reader:
         self.warnings = []
         self.bsdfs = {}        # id -> element
         self.emitters = {}     # id -> top-level <emitter> element
+        self.ids = {}          # id -> any top-level element (samplers, films, textures...)
         self.where = {}        # element -> "/scene/shape[3] (id=light)"
         self.search = []       # <path value>: folders searched for files, latest first
+        self.parent = {}       # element -> its parent element
 
     def file(self, name):
         """A file name as Mitsuba's file resolver finds it: absolute, or relative to the
@@ -111,17 +116,50 @@ class _Reader:
             v = self.numbers(el, self.attr(el, "value", ""), 3)
             return v * 3 if len(v) == 1 else v
         if tag == "spectrum":
-            text = self.attr(el, "value", "")
-            if ":" in text or self.attr(el, "filename"):
-                raise self.error("a spectrum given by wavelengths or a file: pt-render renders "
-                                 "RGB; give <rgb> or a uniform <spectrum value=\"x\">", el)
-            v = self.numbers(el, text, 1)
-            return v * 3
+            return self.spectrum(el)
         if tag in ("point", "vector"):
             if el.get("value") is not None:
                 return self.numbers(el, self.attr(el, "value"), 3)
             return [float(self.numbers(el, self.attr(el, k, "0"), 1)[0]) for k in "xyz"]
         raise self.error(f"unsupported <{tag}>", el)
+
+    def spectrum(self, el):
+        """A <spectrum> as the linear sRGB colour Mitsuba's RGB variants make of it
+        (scene.spectra): uniform, wavelength:value pairs or an .spd file; an emitter's
+        (a spectrum inside an <emitter>) is integrated without D65 and unclipped."""
+        emitter = self.parent.get(el) is not None and self.parent[el].tag == "emitter"
+        name = self.attr(el, "filename")
+        if name:
+            path = self.file(name)
+            try:
+                table = np.loadtxt(path if os.path.isabs(path) else
+                                   os.path.join(self.base, path), comments="#", ndmin=2)
+            except (OSError, ValueError) as e:
+                raise self.error(f"spectrum file {name}: cannot read it "
+                                 f"({' '.join(str(e).split())[:120]})", el) from None
+            if table.shape[1] != 2 or len(table) < 2:
+                raise self.error(f"spectrum file {name}: expected lines of 'wavelength "
+                                 "value'", el)
+            return self._pairs(el, table[:, 0], table[:, 1], emitter)
+        text = self.attr(el, "value", "")
+        if ":" in text:
+            try:
+                pairs = [tuple(float(x) for x in item.split(":")) for item in
+                         re.split(r"\s*,\s*", text.strip()) if item]
+                w, v = zip(*pairs)
+            except ValueError:
+                raise self.error(f"expected wavelength:value pairs, got {text[:60]!r}",
+                                 el) from None
+            return self._pairs(el, w, v, emitter)
+        v = self.numbers(el, text, 1)[0]
+        return [float(x) for x in uniform_to_rgb(v, emitter)]
+
+    def _pairs(self, el, w, v, emitter):
+        w, v = np.asarray(w, float), np.asarray(v, float)
+        if len(w) < 2 or not (np.all(np.diff(w) > 0) and np.isfinite(v).all()):
+            raise self.error("a spectrum needs two or more increasing wavelengths with "
+                             "finite values", el)
+        return [float(x) for x in spectrum_to_rgb(w, v, emitter)]
 
     KINDS = {"int": ("integer",), "float": ("float", "integer"), "str": ("string",),
              "bool": ("boolean",), "color": ("rgb", "spectrum", "float", "integer"),
@@ -275,11 +313,17 @@ def convert_file(path, params=None):
             r.bsdfs[bid] = el
         elif el.tag == "emitter" and el.get("id"):
             r.emitters[el.get("id")] = el
+        if el.get("id"):
+            r.ids[el.get("id")] = el
     have_sensor = False
     for el in root:
         tag = el.tag
         if tag in ("default", "bsdf", "path"):
             continue
+        if tag in ("sampler", "film", "rfilter", "texture", "spectrum", "rgb"):
+            if not el.get("id"):
+                r.warn(f"a top-level <{tag}> without an id is not used", el)
+            continue        # used where a <ref> names it
         if tag == "integrator":
             _integrator(r, el, out["render"])
         elif tag == "sensor":
@@ -294,13 +338,14 @@ def convert_file(path, params=None):
             if el.get("type") == "area" and el.get("id"):
                 continue        # a shape's emitter, declared here and used by <ref>
             _emitter(r, el, out)
-        elif tag in ("texture",):
-            r.warn("a top-level <texture> is only used through a <ref>", el)
         else:
             raise r.error(f"<{tag}> is not supported (pt-render reads sensors, shapes, "
                           "BSDFs, emitters and the path integrator)", el)
     if not have_sensor:
-        raise r.error("no <sensor>: pt-render needs a camera")
+        _default_sensor(r, out)
+    if not any(el.tag == "integrator" for el in root):
+        r.warn("no <integrator>: rendered by the path tracer with pt-render's default of 8 "
+               "bounces (Mitsuba's max_depth 9); Mitsuba 3.9.1 asks for one")
     if not out["materials"]:
         del out["materials"]
     return out, r.warnings
@@ -369,13 +414,36 @@ def _index(r, el, where):
         elif label:
             w += f" ({label})"
         r.where[child] = w
+        r.parent[child] = el
         _index(r, child, w)
 
 
 # ---------------------------------------------------------------------------------------
 
+# Integrators that wrap another (extra images, polarisation): their nested integrator's
+# image is rendered, with a warning
+WRAPPERS = {"moment": "its moment images are not written", "aov": "its AOV images are not "
+            "written (--aovs writes albedo and normal)", "stokes": "polarisation is not "
+            "rendered"}
+# Other estimators of the same image: rendered by ours, with a warning
+SAME_IMAGE = {"ptracer": "path", "prb": "path", "prb_basic": "path", "path_projective": "path",
+              "volpathmis": "volpath", "prbvolpath": "volpath", "direct_projective": "direct"}
+
+
 def _integrator(r, el, render):
     kind = el.get("type")
+    if kind in WRAPPERS:
+        inner = [c for c in el if c.tag == "integrator"]
+        if not inner:
+            raise r.error(f"integrator {kind!r} without a nested integrator: nothing "
+                          "pt-render renders", el)
+        r.warn(f"integrator {kind!r}: its nested {inner[0].get('type')!r} integrator is "
+               f"rendered ({WRAPPERS[kind]})", el)
+        return _integrator(r, inner[0], render)
+    if kind in SAME_IMAGE:
+        r.warn(f"integrator {kind!r} read as {SAME_IMAGE[kind]!r} (another estimator of "
+               "the same image)", el)
+        kind = SAME_IMAGE[kind]
     p = r.params(el)
     if kind in ("path", "volpath"):
         if kind == "volpath":
@@ -397,8 +465,19 @@ def _integrator(r, el, render):
         render["maxBounces"] = 1
         if r.get(p, "hide_emitters", "bool", False):
             render["hideEmitters"] = True
+        for k in p:
+            if k in ("emitter_samples", "bsdf_samples", "shading_samples"):
+                r.warn(f"direct integrator: {k} ignored (one light and one BSDF sample per "
+                       "pass, combined by MIS: the same image, other noise; Mitsuba 3.9.1 "
+                       "multiplies point, spot and directional lights by emitter_samples "
+                       "here, pt-render does not)", p[k][1])
+            elif k != "hide_emitters":
+                r.warn(f"integrator parameter {k!r} ignored", el)
     else:
-        raise r.error(f"integrator {kind!r} is not supported (path, volpath, direct)", el)
+        raise r.error(f"integrator {kind!r} is not supported (path, volpath, direct; "
+                      f"{', '.join(sorted(SAME_IMAGE))} read as one of them; "
+                      f"{', '.join(WRAPPERS)} by their nested one)",
+                      el)
 
 
 def _sensor(r, el, out):
@@ -409,6 +488,12 @@ def _sensor(r, el, out):
     cam = out["camera"]
     width, height = 768, 576                       # Mitsuba's hdrfilm defaults
     for child in el:
+        if child.tag == "ref":
+            ref = child
+            child = r.ids.get(ref.get("id"))
+            if child is None or child.tag not in ("film", "sampler"):
+                raise r.error(f"<ref id={ref.get('id')!r}>: no top-level film or sampler "
+                              "with that id", ref)
         if child.tag == "film":
             fp = r.params(child)
             width = r.get(fp, "width", "int", width)
@@ -456,6 +541,47 @@ def _sensor(r, el, out):
             cam["focusDistance"] = focus
 
 
+def _default_sensor(r, out):
+    """Mitsuba's camera for a scene without a sensor (its Scene constructor): a 45-degree
+    perspective camera looking along +Z from in front of the scene's bounding box, at the
+    distance where the box's largest extent fills the view; a 768 x 576 film."""
+    lo, hi = _bounds(r, out)
+    center, extents = (lo + hi) / 2, hi - lo
+    distance = float(extents.max()) / (2 * math.tan(math.radians(22.5)))
+    origin = [float(center[0]), float(center[1]), float(lo[2] - distance)]
+    out["camera"] = {"resolution": [768, 576], "position": origin,
+                     "lookAt": [origin[0], origin[1], origin[2] + 1], "up": [0, 1, 0],
+                     "fov": 45.0}
+    r.warn("no <sensor>: Mitsuba's default camera (45 degrees, looking along +Z at the "
+           "whole scene)")
+
+
+def _bounds(r, out):
+    """The bounding box (lo, hi) of the converted objects, their files read."""
+    from .meshes import load_mesh
+    points = []
+    for obj in out["objects"]:
+        if "file" in obj:
+            path = obj["file"] if os.path.isabs(obj["file"]) else os.path.join(r.base,
+                                                                             obj["file"])
+            try:
+                v = load_mesh(path, shape_index=obj.get("shapeIndex", 0)).positions
+            except (SceneError, OSError):
+                continue        # the load itself reports it
+            v = v.reshape(-1, 3).astype(np.float64)
+        else:
+            v = np.asarray(obj["vertices"], np.float64)
+        if "transform" in obj:
+            m = np.asarray(obj["transform"]["matrix"])
+            v = v @ m[:3, :3].T + m[:3, 3]
+        if len(v):
+            points.append(np.array([v.min(0), v.max(0)]))
+    if not points:
+        return -np.ones(3), np.ones(3)
+    both = np.concatenate(points)
+    return both.min(0), both.max(0)
+
+
 def _tan_half_fov_x(r, el, p, aspect):
     """tan(fov_x / 2) of a perspective sensor, by Mitsuba's rule (sensor.h, parse_fov):
     ``fov`` on ``fov_axis`` (x by default; smaller/larger by the film's aspect), else
@@ -501,24 +627,60 @@ def _tan_half_fov_x(r, el, p, aspect):
 def _rgb_or_texture(r, el, tag_el):
     """A colour or a bitmap texture value in the scene format."""
     tag, v = tag_el
-    if tag == "texture":
-        if v.get("type") != "bitmap":
-            raise r.error(f"texture {v.get('type')!r} is not supported (bitmap)", v)
-        tp = r.params(v)
-        if "filename" not in tp:
-            raise r.error("bitmap without a filename", v)
-        spec = {"texture": r.file(r.get(tp, "filename", "str"))}
-        raw = r.get(tp, "raw", "bool", False)
-        spec["colorSpace"] = "linear" if raw else "sRGB"
-        # Mitsuba 3 has no mip-maps: its bitmaps are filtered bilinearly (or nearest)
-        ft = r.get(tp, "filter_type", "str") if "filter_type" in tp else "bilinear"
-        spec["filter"] = "nearest" if ft == "nearest" else "bilinear"
-        for k in tp:
-            if k not in ("filename", "raw", "filter_type"):
-                r.warn(f"bitmap parameter {k!r} ignored", v)
-        return spec
     if tag == "ref":
-        raise r.error("a texture given by <ref> is not supported: give it inline", v)
+        target = r.ids.get(v.get("id"))
+        if target is None or target.tag not in ("texture", "rgb", "spectrum"):
+            raise r.error(f"<ref id={v.get('id')!r}>: no top-level texture with that id", v)
+        tag, v = target.tag, target
+    if tag == "texture":
+        kind = v.get("type")
+        if kind not in ("bitmap", "checkerboard"):
+            raise r.error(f"texture {kind!r} is not supported (bitmap, checkerboard)", v)
+        tp = r.params(v)
+        if kind == "checkerboard":
+            # Mitsuba's checkerboard (checkerboard.cpp): color0 where the fractional parts
+            # of (u, v) are both above 1/2 or both not, else color1 -- exactly a 2 x 2
+            # image looked up nearest and repeated, which is how it is rendered here
+            c0 = r.get(tp, "color0", "color", [0.4] * 3)
+            c1 = r.get(tp, "color1", "color", [0.2] * 3)
+            img = np.array([[c0, c1], [c1, c0]], np.float32)
+            buf = io.BytesIO()
+            np.save(buf, img, allow_pickle=False)
+            spec = {"texture": cached_file(buf.getvalue(), ".npy", "mitsuba-textures"),
+                    "colorSpace": "linear", "filter": "nearest"}
+            known = ("color0", "color1", "to_uv")
+        else:
+            if "filename" not in tp:
+                raise r.error("bitmap without a filename", v)
+            spec = {"texture": r.file(r.get(tp, "filename", "str"))}
+            raw = r.get(tp, "raw", "bool", False)
+            spec["colorSpace"] = "linear" if raw else "sRGB"
+            # Mitsuba 3 has no mip-maps: its bitmaps are filtered bilinearly (or nearest)
+            ft = r.get(tp, "filter_type", "str") if "filter_type" in tp else "bilinear"
+            spec["filter"] = "nearest" if ft == "nearest" else "bilinear"
+            known = ("filename", "raw", "filter_type", "wrap_mode", "to_uv")
+        wrap = r.get(tp, "wrap_mode", "str", "repeat")
+        if wrap not in ("repeat", "mirror", "clamp"):
+            raise r.error(f"wrap_mode {wrap!r}: expected repeat, mirror or clamp", v)
+        if wrap != "repeat":
+            spec["wrap"] = wrap
+        if "to_uv" in tp:
+            m = r.transform(tp["to_uv"][1])
+            # (u, v) -> rows 0 and 1, columns 0, 1 and the translation's 3 (a 4 x 4 given for
+            # a 2D transform: its z row and column are not used)
+            if not (np.allclose(m[:2, :2], np.diag(np.diag(m[:2, :2]))) and
+                    np.allclose(m[:2, 2], 0)):
+                raise r.error("to_uv: only a scale and a translation of (u, v) are supported "
+                              "(no rotation)", tp["to_uv"][1])
+            su, sv, tu, tv = m[0, 0], m[1, 1], m[0, 3], m[1, 3]
+            # Mitsuba's rows count from the top at v_m = 1 - v (its mesh loaders flip v):
+            # its row s_v v_m + t_v is ours from the bottom at s_v v + (1 - s_v - t_v)
+            spec["tile"] = [float(su), float(sv)]
+            spec["offset"] = [float(tu), float(1 - sv - tv)]
+        for k in tp:
+            if k not in known:
+                r.warn(f"{kind} parameter {k!r} ignored", v)
+        return spec
     return r.get({"value": (tag, v)}, "value", "color")
 
 
@@ -668,25 +830,33 @@ def _shape(r, el, out, materials):
     elif kind == "rectangle":
         obj["vertices"] = [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]
         obj["faces"] = [[0, 1, 2], [0, 2, 3]]
+        # Mitsuba's (u, v) = ((x + 1) / 2, (y + 1) / 2), v turned to this format's 1 - v
+        obj["uvs"] = [[0, 1], [1, 1], [1, 0], [0, 0]]
     elif kind == "cube":
         obj["vertices"], obj["faces"] = _cube()
     elif kind == "sphere":
         from .geometry import uv_sphere
         radius = r.get(p, "radius", "float", 1.0)
         center = r.get(p, "center", "point", [0.0, 0.0, 0.0])
-        v, f = uv_sphere(64, 128, 1.0)
-        obj["vertices"], obj["faces"] = v.tolist(), f.tolist()
+        # Mitsuba's sphere: its pole on local +Z, u = phi / 2 pi from +X towards +Y, v =
+        # theta / pi; uv_sphere's seamed grid has its pole on +Y and phi towards -Z, and
+        # v = 1 - theta / pi already (this format's v): turned onto Mitsuba's axes
+        v, f, uv = uv_sphere(64, 128, 1.0, seam=True)
+        v = v @ np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]]).T
+        obj["vertices"], obj["faces"], obj["uvs"] = v.tolist(), f.tolist(), uv.tolist()
         obj["smooth"] = True
         local = np.eye(4)
         local[:3, :3] *= radius
         local[:3, 3] = center
         m = m @ local
-        r.warn("sphere tessellated into 16,128 triangles (smooth normals)", el)
+        r.warn(f"sphere tessellated into {len(f):,} triangles (smooth normals)", el)
     else:
         raise r.error(f"shape {kind!r} is not supported (obj, ply, serialized, rectangle, "
                       "cube, sphere)",
                       el)
     for k in p:
+        if p[k][0] in ("ref", "bsdf", "emitter"):
+            continue        # <ref name="bsdf" id=...>: read below
         if k not in ("filename", "face_normals", "to_world", "radius", "center",
                      "shape_index"):
             if k == "flip_normals":
