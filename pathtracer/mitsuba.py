@@ -149,6 +149,8 @@ def mitsuba_dict(desc, spp=1, sampler="independent"):
     else:
         # Mitsuba's envmap turned 180 degrees about +Y is the scene format's mapping; the
         # scene's rotation (counter-clockwise seen from above) adds to it
+        m = np.eye(4)
+        m[:3, :3] = env.world_from_map() @ np.diag([-1.0, 1.0, -1.0])
         d["env"] = {"type": "envmap", "filename": env.path, "scale": env.intensity,
-                    "to_world": T().rotate([0, 1, 0], 180 + env.rotation)}
+                    "to_world": T(m)}
     return d

@@ -57,7 +57,7 @@ import numpy as np
 from .constants import HALF, LUM_B, LUM_G, LUM_R, ONE, PI, TWO_PI, ZERO
 from .device import device
 from .fmath import acos_f32, atan2_f32
-from .layout import ENV_COS_ROT, ENV_DENSITY, ENV_SIN_ROT, ENV_TEXEL_WIDTH
+from .layout import ENV_DENSITY, ENV_ROT, ENV_TEXEL_WIDTH
 from .loads import load4_texel, prefetch
 from .textures import bilinear_blend, bilinear_cell
 from .warps import sincos
@@ -69,12 +69,15 @@ TWO_PI_SQ = np.float32(2.0 * np.pi * np.pi)
 
 @device
 def env_uv(env_info, d):
-    """Texture coordinates (u, v) in [0, 1] of world direction d."""
-    c = env_info[ENV_COS_ROT]
-    s = env_info[ENV_SIN_ROT]
-    x = d[0] * c - d[2] * s
-    z = d[0] * s + d[2] * c
-    y = min(max(d[1], -ONE), ONE)
+    """Texture coordinates (u, v) in [0, 1] of world direction d (turned into the map's
+    frame by env_info's rotation: any orientation, as Mitsuba's envmap to_world)."""
+    x = (env_info[ENV_ROT] * d[0] + env_info[ENV_ROT + 1] * d[1] +
+         env_info[ENV_ROT + 2] * d[2])
+    y = (env_info[ENV_ROT + 3] * d[0] + env_info[ENV_ROT + 4] * d[1] +
+         env_info[ENV_ROT + 5] * d[2])
+    z = (env_info[ENV_ROT + 6] * d[0] + env_info[ENV_ROT + 7] * d[1] +
+         env_info[ENV_ROT + 8] * d[2])
+    y = min(max(y, -ONE), ONE)
     u = HALF + atan2_f32(x, -z) * INV_TWO_PI
     v = acos_f32(y) * INV_PI_F
     return u, v, y
@@ -281,9 +284,12 @@ def env_sample_lit(env_marg, env_cond, env_guide, env_img, env_info, u1, u2, gui
     sin_p, cos_p = sincos(phi)
     xm = sin_t * sin_p
     zm = -sin_t * cos_p
-    c = env_info[ENV_COS_ROT]
-    sn = env_info[ENV_SIN_ROT]
-    d = (xm * c + zm * sn, cos_t, -xm * sn + zm * c)
+    # back to the world: the transpose of the rotation
+    d = (env_info[ENV_ROT] * xm + env_info[ENV_ROT + 3] * cos_t + env_info[ENV_ROT + 6] * zm,
+         env_info[ENV_ROT + 1] * xm + env_info[ENV_ROT + 4] * cos_t +
+         env_info[ENV_ROT + 7] * zm,
+         env_info[ENV_ROT + 2] * xm + env_info[ENV_ROT + 5] * cos_t +
+         env_info[ENV_ROT + 8] * zm)
     if sin_t <= ZERO:
         return d, ZERO, radiance, u, v
     return d, p_uv / (TWO_PI_SQ * sin_t), radiance, u, v

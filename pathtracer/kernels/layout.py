@@ -208,10 +208,9 @@ LT_LINK_WIDTH = 3
 ENV_DENSITY = 3
 ENV_TEXEL_WIDTH = 4
 # env_info, float32 (ENV_INFO_SIZE,)
-ENV_COS_ROT = 0       # cos and sin of the map's rotation about +Y
-ENV_SIN_ROT = 1
-ENV_P_SELECT = 2      # probability that next-event estimation picks the environment
-ENV_INFO_SIZE = 4
+ENV_P_SELECT = 0      # probability that next-event estimation picks the environment
+ENV_ROT = 1           # 3 x 3 rotation, row-major, taking world directions into the map's frame
+ENV_INFO_SIZE = 12
 
 # ---- Textures: tex_int, int32 (K, TEX_INT_WIDTH); tex_f, float32 (K, TEX_F_WIDTH) ------------
 TEX_FIRST = 0         # index of the first texel in tex_data

@@ -29,9 +29,9 @@ from ..accel import build_bvh
 from ..kernels.envmap import environment_tables
 from ..kernels.layout import (CAM_CONE, CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_LENS_Y, CAM_ORIGIN,
                               CAM_RIGHT,
-                              CAM_SIZE, CAM_UP, ENV_COS_ROT, ENV_INFO_SIZE, ENV_P_SELECT,
+                              CAM_SIZE, CAM_UP, ENV_INFO_SIZE, ENV_P_SELECT, ENV_ROT,
                               ENV_TEXEL_WIDTH,
-                              ENV_SIN_ROT, FILTER_BILINEAR, FILTER_NEAREST, FILTER_TRILINEAR,
+                              FILTER_BILINEAR, FILTER_NEAREST, FILTER_TRILINEAR,
                               LT_LINK_WIDTH, LT_WIDTH,
                               M_ALBEDO, M_ANISOTROPIC, M_EMISSION, M_ETA, M_TWO_SIDED, M_TYPE,
                               MAT_DIFFUSE, MAT_PRINCIPLED, MAT_WIDTH, MATERIAL_PARAMS, N_SLOTS,
@@ -741,7 +741,7 @@ def compile_environment(desc, has_lights, memo=None):
     cond = np.array([[0.0, 1.0]], np.float32)
     guide = np.zeros((2, 2), np.int32)
     info = np.zeros(ENV_INFO_SIZE, np.float32)
-    info[ENV_COS_ROT] = 1.0
+    info[ENV_ROT:ENV_ROT + 9] = np.eye(3).reshape(-1)
     has_map = False
     if isinstance(desc.environment, EnvironmentMap):
         env_map = desc.environment
@@ -751,9 +751,8 @@ def compile_environment(desc, has_lights, memo=None):
         if got is not None:
             img, marg, cond, guide = got
             has_map = True
-            phi = math.radians(desc.environment.rotation)
-            info[ENV_COS_ROT] = math.cos(phi)
-            info[ENV_SIN_ROT] = math.sin(phi)
+            # world -> map: the transpose of the map's orientation in the world
+            info[ENV_ROT:ENV_ROT + 9] = env_map.world_from_map().T.reshape(-1)
             info[ENV_P_SELECT] = 0.5 if has_lights else 1.0
     elif desc.environment is not None:
         color[:] = desc.environment

@@ -128,6 +128,16 @@ class EnvironmentMap:
     rotation: float = 0.0      # degrees about +Y
     pointer: str = ""
     compensate: bool = True    # MIS compensation of the sampling density (kernels.envmap)
+    matrix: Optional[np.ndarray] = None   # 3 x 3 rotation: map directions -> world
+
+    def world_from_map(self):
+        """The rotation taking the map's directions into the world's: ``matrix``, or the
+        turn by ``rotation`` degrees about +Y (counter-clockwise seen from above)."""
+        if self.matrix is not None:
+            return np.asarray(self.matrix, np.float64)
+        phi = math.radians(self.rotation)
+        c, s = math.cos(phi), math.sin(phi)
+        return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
 @dataclass
@@ -589,7 +599,7 @@ def _color_or_texture(n, key, default, base, color_space, material, slot, hi):
 
 
 TEXTURE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".hdr", ".exr", ".tga", ".tif",
-                      ".tiff")
+                      ".tiff", ".npy")      # .npy: an H x W x 3 array (linear floats)
 
 
 def _texture_spec(n, key, base, color_space):
@@ -817,6 +827,15 @@ def _environment(n, base, thesis=False):
         rotation = 360.0 * (x_off - 0.25)
     else:
         rotation = n.number("rotation", 0.0)
+    matrix = None
+    if n.has("matrix"):
+        if n.has("rotation"):
+            raise n.error("give 'rotation' or 'matrix', not both", "matrix")
+        matrix = _array(n, "matrix", float, 3)
+        if matrix.shape != (3, 3) or not np.allclose(matrix @ matrix.T, np.eye(3), atol=1e-5) \
+                or not np.linalg.det(matrix) > 0:
+            raise n.error("expected a 3 x 3 rotation (orthonormal rows, determinant 1)",
+                          "matrix")
     intensity = n.number("intensity", 1.0, lo=0, hi=limits.MAX_RADIANCE)
     if n.has(file_key):
         name = n.string(file_key)
@@ -825,7 +844,7 @@ def _environment(n, base, thesis=False):
         n.finish()
         if not os.path.isfile(path):
             raise n.error(f"environment map not found: {path}", file_key)
-        return EnvironmentMap(path, intensity, rotation, n.path(file_key), compensate)
+        return EnvironmentMap(path, intensity, rotation, n.path(file_key), compensate, matrix)
     if not n.has("color"):
         raise n.error(f"needs 'color' or '{file_key}'")
     color = n.color("color")

@@ -971,14 +971,19 @@ def _emitter(r, el, out):
             env["intensity"] = r.get(p, "scale", "float")
         m = r.transform(p["to_world"][1]) if "to_world" in p else np.eye(4)
         # the scene format's map is Mitsuba's envmap turned 180 degrees about +Y
-        # (pathtracer/mitsuba.py); any other turn about +Y adds to our rotation
-        rot = m[:3, :3]
-        if not (np.allclose(rot[1], [0, 1, 0], atol=1e-6) and np.allclose(rot[:, 1], [0, 1, 0],
-                                                                          atol=1e-6)
-                and np.allclose(rot @ rot.T, np.eye(3), atol=1e-6)):
-            raise r.error("envmap to_world: only rotations about +Y are supported", el)
-        angle = math.degrees(math.atan2(rot[0, 2], rot[0, 0]))
-        env["rotation"] = (angle - 180 + 180) % 360 - 180
+        # (pathtracer/mitsuba.py): its orientation in the world is to_world's rotation
+        # times that half turn. A uniform scale (which Mitsuba's envmap ignores) goes.
+        rot = m[:3, :3] / np.cbrt(np.linalg.det(m[:3, :3])) if np.linalg.det(
+            m[:3, :3]) > 0 else m[:3, :3]
+        if not np.allclose(rot @ rot.T, np.eye(3), atol=1e-5) or not np.linalg.det(rot) > 0:
+            raise r.error("envmap to_world: expected a rotation (no shear, mirror or "
+                          "non-uniform scale)", el)
+        world = rot @ np.diag([-1.0, 1.0, -1.0])
+        if np.allclose(world[1], [0, 1, 0], atol=1e-9) and np.allclose(world[:, 1], [0, 1, 0],
+                                                                       atol=1e-9):
+            env["rotation"] = math.degrees(math.atan2(world[0, 2], world[0, 0]))
+        else:
+            env["matrix"] = world.tolist()
         out["environment"] = env
     elif kind == "area":
         raise r.error("an area emitter belongs inside a <shape>", el)
