@@ -635,3 +635,41 @@ def test_vertex_color_test_model_shows_no_crosses():
     x0, x1 = board[0], board[-1] + 1
     diff = np.abs(a[y0:y1, x0:x1] - a[y0 + off:y1 + off, x0:x1]).mean()
     assert diff < 0.035, diff
+
+
+def test_unlit_material_shows_its_base_colour(tmp_path):
+    """KHR_materials_unlit: the camera sees exactly the base colour, whatever the light (it
+    is rendered as a surface emitting it, reflecting nothing; a warning says so)."""
+    b = Builder()
+    b.used.add("KHR_materials_unlit")
+    mi = b.material({"pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.1, 0.3, 1]},
+                     "extensions": {"KHR_materials_unlit": {}}})
+    b.node(mesh=b.mesh(QUAD_V, QUAD_F, material=mi))
+    path = b.save(tmp_path / "u.glb")
+    scene = pt.load_scene(path, camera={"position": [0, 0, 3], "lookAt": [0, 0, 0],
+                                        "resolution": [8, 8], "fov": 20})
+    assert any("KHR_materials_unlit" in w for w in scene.warnings)
+    img = pt.render(scene, spp=4, backend="cpu").image
+    assert np.allclose(img, [0.8, 0.1, 0.3], rtol=1e-5)
+
+
+def test_specular_glossiness_converts_to_metallic_roughness(tmp_path):
+    """KHR_materials_pbrSpecularGlossiness: a dielectric (specular 0.04) keeps its diffuse
+    colour as base colour with metallic 0; a metal (dark diffuse, coloured specular)
+    becomes metallic with the specular colour as its base; roughness = 1 - glossiness."""
+    def material(sg):
+        b = Builder()
+        b.used.add("KHR_materials_pbrSpecularGlossiness")
+        mi = b.material({"extensions": {"KHR_materials_pbrSpecularGlossiness": sg}})
+        b.node(mesh=b.mesh(QUAD_V, QUAD_F, material=mi))
+        return read_model(b.save(tmp_path / f"sg{len(sg)}{sg.get('glossinessFactor')}.glb")
+                          ).materials[0]
+    plastic = material({"diffuseFactor": [0.5, 0.2, 0.1, 1], "specularFactor": [0.04] * 3,
+                        "glossinessFactor": 0.7})
+    assert plastic["metallic"] == 0 and np.allclose(plastic["albedo"], [0.5, 0.2, 0.1])
+    assert plastic["roughness"] == pytest.approx(0.3)
+    gold = material({"diffuseFactor": [0, 0, 0, 1], "specularFactor": [1.0, 0.78, 0.34],
+                     "glossinessFactor": 0.9})
+    assert gold["metallic"] > 0.99 and np.allclose(gold["albedo"], [1.0, 0.78, 0.34],
+                                                   atol=0.01)
+    assert gold["roughness"] == pytest.approx(0.1)

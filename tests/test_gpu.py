@@ -57,8 +57,8 @@ def test_no_float64_in_ptx():
 
 def _full_feature_scene(tmp_path):
     """Every kernel feature at once: principled materials with textures (mirrored and
-    clamped) and a normal map, emissive triangles, a point light, an HDRI, smooth normals
-    and a thin lens."""
+    clamped) and a normal map, emissive triangles, a point light, a tilted HDRI, smooth
+    normals, a thin lens, vertex colours and hidden emitters."""
     import imageio.v3 as iio
 
     from pathtracer.film import write_image
@@ -71,10 +71,20 @@ def _full_feature_scene(tmp_path):
     obj.write_text("v -3 -1 -3\nv 3 -1 -3\nv 3 -1 3\nv -3 -1 3\nvt 0 0\nvt 4 0\nvt 4 4\n"
                    "vt 0 4\nvn 0 1 0\nf 1/1/1 4/4/1 3/3/1\nf 1/1/1 3/3/1 2/2/1\n")
     v, f = sphere_mesh(10, 20)
+    from tests.gltf_writers import Builder
+    b = Builder()
+    mat = b.material({"pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.9, 0.9, 1],
+                                               "metallicFactor": 0, "roughnessFactor": 0.6}})
+    quad = np.array([[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]], float)
+    b.node(mesh=b.mesh(quad, [[0, 2, 1], [0, 3, 2]], material=mat,
+                       colors=[[255, 0, 0], [0, 255, 0], [0, 0, 255], [255, 255, 0]]),
+           translation=[-1.5, -0.5, 1])
+    b.save(tmp_path / "vc.glb")
+    c, s_ = np.cos(0.4), np.sin(0.4)
     scene = {
         "camera": {"resolution": [48, 32], "position": [0, 1, 5], "lookAt": [0, 0, 0],
                    "aperture": 8, "focusDistance": 5},
-        "render": {"maxBounces": 6, "rrDepth": 2},
+        "render": {"maxBounces": 6, "rrDepth": 2, "hideEmitters": True},
         "materials": [
             {"name": "floor", "albedo": {"texture": "a.png", "wrap": ["mirror", "clamp"]},
              "roughness": 0.4, "normalMap": "n.png", "anisotropic": 0.5,
@@ -86,9 +96,11 @@ def _full_feature_scene(tmp_path):
             {"name": "floor", "file": "quad.obj", "material": "floor"},
             {"name": "ball", "vertices": v, "faces": f, "material": "glass", "smooth": True},
             {"name": "lamp", "vertices": v, "faces": f, "material": "lamp",
-             "transform": {"translate": [2, 2, 0], "scale": 0.3}}],
+             "transform": {"translate": [2, 2, 0], "scale": 0.3}},
+            {"name": "coloured", "file": "vc.glb"}],
         "lights": [{"position": [-2, 3, 1], "intensity": 5}],
-        "environment": {"file": "sky.hdr", "rotation": 20},
+        "environment": {"file": "sky.hdr",
+                        "matrix": [[1, 0, 0], [0, c, -s_], [0, s_, c]]},     # tilted about X
     }
     from pathtracer.scene import load_scene
     s = load_scene(write_scene(tmp_path, scene))

@@ -621,3 +621,26 @@ def test_hide_emitters_hides_only_what_the_camera_sees_directly(tmp_path, backen
     assert hidden[~sees_emitter].mean() > 0.05
     zero = run(hidden_scene, backend, spp=4, max_bounces=0).film.image()
     assert np.all(zero == 0)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_one_sided_material_is_black_from_behind(tmp_path, backend):
+    """oneSided (Mitsuba's BSDFs outside twosided): a quad lit from both sides under a
+    constant sky shows its albedo x sky from the front and nothing from behind; without
+    oneSided both sides reflect."""
+    quad = {"name": "q", "vertices": [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]],
+            "faces": [[0, 1, 2], [0, 2, 3]], "material": "m"}     # front: +z
+    def render(one_sided, z):
+        scene = {"camera": {"resolution": [8, 8], "position": [0, 0, z], "lookAt": [0, 0, 0],
+                            "fov": 20},
+                 "render": {"maxBounces": 1},
+                 "materials": [{"name": "m", "type": "diffuse", "albedo": 0.6,
+                                "oneSided": one_sided}],
+                 "objects": [quad], "environment": {"color": 1.0}}
+        s = load_scene(write_scene(tmp_path, scene))
+        assert s.features.one_sided == one_sided
+        return run(s, backend, spp=8).film.image()
+    # a lone quad under a uniform sky: its upper hemisphere is all sky, L = albedo
+    assert np.allclose(render(True, 3), 0.6, rtol=1e-4)
+    assert np.all(render(True, -3) == 0)
+    assert np.allclose(render(False, -3), 0.6, rtol=1e-4)

@@ -32,7 +32,8 @@ from .emitters import make_emitters
 from .envmap import env_locate, env_prefetch
 from .layout import (AOV_ALBEDO, AOV_NORMAL, CAM_CONE, D_BSDF_LOBE, D_BSDF_U, D_BSDF_V,
                      D_FIRST_BOUNCE, D_LENS_U, D_LENS_V, D_LIGHT_SELECT, D_LIGHT_U, D_LIGHT_V,
-                     D_PIXEL_X, D_PIXEL_Y, D_RR, DIMS_PER_BOUNCE, ESC_BETA, ESC_FX, ESC_FY,
+                     D_PIXEL_X, D_PIXEL_Y, D_RR, DIMS_PER_BOUNCE, M_ONE_SIDED,
+                     ESC_BETA, ESC_FX, ESC_FY,
                      ESC_I0, ESC_I1, ESC_J0, ESC_J1, ESC_OUT, ESC_PDF_PREV, ESC_PX,
                      ESC_RADIANCE, ESC_Y, ESCAPE_RING, HIT_B1, HIT_B2, HIT_T,
                      P_BASE, P_METALLIC, PATH_BETA, PATH_BOUNCE, PATH_BOUNCE_RAYS,
@@ -119,6 +120,7 @@ def make_kernels(features, target="cpu"):
     NEE = S.nee
     MIPMAPS = S.mipmaps
     VERTEX_COLORS = S.vertex_colors
+    ONE_SIDED = S.one_sided
     # The CPU traverses the eight-wide BVH (kernels.wide: SIMD box and triangle tests), whose
     # arrays its backend puts in the scene's bvh_box and bvh_child; the GPU the binary one.
     WIDE = target == "cpu"
@@ -282,6 +284,11 @@ def make_kernels(features, target="cpu"):
                 radiance = add(radiance, scale(mul(beta, le), weight))
         if bounce >= max_bounces:
             return o, d, beta, radiance, pdf_prev, skip, bounce, cone, 0, 0, False
+        if ONE_SIDED:
+            # a one-sided material (Mitsuba's BSDFs outside twosided) seen from behind is
+            # black: the path ends
+            if scene.mat[m, M_ONE_SIDED] > ZERO and not (dot(ng, wo) > ZERO):
+                return o, d, beta, radiance, pdf_prev, skip, bounce, cone, 0, 0, False
         is_principled, params = material_at(scene.mat, scene.mat_tex, scene.tex_data,
                                             scene.tex_int, scene.tex_f, m, tu, tv, fp)
         if VERTEX_COLORS:
@@ -496,6 +503,9 @@ def make_kernels(features, target="cpu"):
                     radiance = add(radiance, scale(mul(beta, le), weight))
             if bounce >= max_bounces:
                 break
+            if ONE_SIDED:
+                if scene.mat[m, M_ONE_SIDED] > ZERO and not (dot(ng, wo) > ZERO):
+                    break
             is_principled, params = material_at(scene.mat, scene.mat_tex, scene.tex_data,
                                                 scene.tex_int, scene.tex_f, m, tu, tv, fp)
             if VERTEX_COLORS:

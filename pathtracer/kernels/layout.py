@@ -77,7 +77,8 @@ M_CLEARCOAT = 16
 M_CLEARCOAT_GLOSS = 17
 M_SUBSURFACE = 18
 M_TRANSMISSION = 19
-MAT_WIDTH = 20
+M_ONE_SIDED = 20      # 1: reflects only on its front side, black from behind (oneSided)
+MAT_WIDTH = 21
 
 MAT_DIFFUSE = 0
 MAT_PRINCIPLED = 1
@@ -357,6 +358,7 @@ class Features(NamedTuple):
     # glass they are)
     hide_emitters: bool = False
     vertex_colors: bool = False   # per-vertex colours multiply the base colour (tri_col)
+    one_sided: bool = False       # a material that is black from behind (oneSided)
 
 
 class Specialisation(NamedTuple):
@@ -384,6 +386,7 @@ class Specialisation(NamedTuple):
     light_tree: bool       # lights picked by the light tree at each shading point
     hide_emitters: bool    # camera rays see no emitter (render.hideEmitters)
     vertex_colors: bool    # interpolated vertex colours multiply the base colour
+    one_sided: bool        # some material reflects on its front side only
 
 
 def specialise(features):
@@ -403,7 +406,7 @@ def specialise(features):
         lobes=(f.dielectric, f.clearcoat, f.sheen, f.transmission, f.flatness, f.spec_tint,
                f.anisotropic),
         light_tree=f.light_tree and any_lights, hide_emitters=f.hide_emitters,
-        vertex_colors=f.vertex_colors)
+        vertex_colors=f.vertex_colors, one_sided=f.one_sided)
 
 
 class SceneArrays(NamedTuple):

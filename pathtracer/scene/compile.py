@@ -33,7 +33,8 @@ from ..kernels.layout import (CAM_CONE, CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_
                               ENV_TEXEL_WIDTH,
                               FILTER_BILINEAR, FILTER_NEAREST, FILTER_TRILINEAR,
                               LT_LINK_WIDTH, LT_WIDTH,
-                              M_ALBEDO, M_ANISOTROPIC, M_EMISSION, M_ETA, M_TWO_SIDED, M_TYPE,
+                              M_ALBEDO, M_ANISOTROPIC, M_EMISSION, M_ETA, M_ONE_SIDED,
+                              M_TWO_SIDED, M_TYPE,
                               MAT_DIFFUSE, MAT_PRINCIPLED, MAT_WIDTH, MATERIAL_PARAMS, N_SLOTS,
                               NO_TEXTURE, PL_AXIS, PL_CONE_OFFSET, PL_CONE_SCALE, PL_INTENSITY,
                               PL_POSITION, PL_WIDTH, T_ALBEDO, T_EMISSION,
@@ -168,7 +169,7 @@ def compile_scene(desc, use_cache=True, bvh_options=None, memo=None):
         wrap_modes=use_textures and any(p[4] != ("repeat", "repeat") for p in tables.tex_params),
         mipmaps=use_textures and any(p[0] == "trilinear" for p in tables.tex_params),
         light_tree=tree is not None, hide_emitters=desc.render.hide_emitters,
-        vertex_colors=tri.has_colors,
+        vertex_colors=tri.has_colors, one_sided=bool((mat[:, M_ONE_SIDED] > 0).any()),
         **principled_lobes(mat, mat_tex))
     cam = camera_array(desc.camera, tri.shift, desc.render.spp)
     if not (np.isfinite(cam).all() and np.abs(cam).max() <= limits.FLOAT32_MAX):
@@ -312,8 +313,9 @@ class MaterialTables:
         return self._default
 
     def add(self, mtype, albedo, emission, two_sided, numbers=None, textures=None,
-            normal_map=None):
+            normal_map=None, one_sided=False):
         row = np.zeros(MAT_WIDTH, np.float32)
+        row[M_ONE_SIDED] = 1.0 if one_sided else 0.0
         tex = np.full(N_SLOTS, NO_TEXTURE, np.int32)
         row[M_ALBEDO:M_ALBEDO + 3] = albedo
         row[M_EMISSION:M_EMISSION + 3] = emission
@@ -406,7 +408,7 @@ def compile_materials(desc, memo=None):
     mat_index = {}
     for name, m in desc.materials.items():
         mat_index[name] = tables.add(m.type, m.albedo, m.emission, m.two_sided, m.numbers,
-                                     m.textures, m.normal_map)
+                                     m.textures, m.normal_map, m.one_sided)
     return tables, mat_index
 
 
@@ -577,7 +579,7 @@ def _object_triangles(obj, desc, tables, mat_index, use_cache, memo=None):
             if mesh.material_format == "scene":      # glTF: scene-format materials
                 m = scene_material(mm, obj.file)
                 local[i] = tables.add(m.type, m.albedo, m.emission, m.two_sided, m.numbers,
-                                      m.textures, m.normal_map)
+                                      m.textures, m.normal_map, m.one_sided)
             else:
                 local[i] = obj_material(tables, mm, os.path.dirname(obj.file), desc.path,
                                         f"{where}/file")

@@ -56,7 +56,8 @@ LUMENS_PER_WATT = 683.0
 SUPPORTED_EXTENSIONS = {
     "KHR_materials_emissive_strength", "KHR_materials_transmission", "KHR_materials_ior",
     "KHR_materials_clearcoat", "KHR_materials_sheen", "KHR_materials_specular",
-    "KHR_texture_transform", "KHR_lights_punctual", "KHR_mesh_quantization"}
+    "KHR_texture_transform", "KHR_lights_punctual", "KHR_mesh_quantization",
+    "KHR_materials_unlit", "KHR_materials_pbrSpecularGlossiness"}
 # without these the geometry or the images cannot be read at all
 UNREADABLE_EXTENSIONS = {"KHR_draco_mesh_compression", "EXT_meshopt_compression",
                          "KHR_texture_basisu", "EXT_texture_webp", "EXT_texture_avif"}
@@ -458,6 +459,13 @@ class GltfModel:
                 out["twoSided"] = True
         if (m.alphaMode or "OPAQUE") != "OPAQUE":
             self.warn(f"{mw}: alphaMode {m.alphaMode} not supported (rendered opaque)")
+        if "KHR_materials_pbrSpecularGlossiness" in ext:
+            self._specular_glossiness(ext["KHR_materials_pbrSpecularGlossiness"], out, mw, sets)
+        if "KHR_materials_unlit" in ext:
+            out = self._unlit(out, m, mw)
+            got = (self._add(out), sets[0] if sets else 0)
+            self._materials[index] = got
+            return got
         self._extensions(ext, out, mw, sets)
         if (out["metallic"] == 0 and out.get("specular") == 0 and "eta" not in out
                 and "normalMap" not in out
@@ -475,6 +483,60 @@ class GltfModel:
         got = (self._add(out), texcoord)
         self._materials[index] = got
         return got
+
+    def _unlit(self, out, m, mw):
+        """KHR_materials_unlit: the surface shows its base colour whatever the lighting. A
+        path tracer has no such surface; it is rendered as one that emits its base colour
+        (a texture too) and reflects nothing: the camera sees exactly its base colour,
+        but it also lights what is near it a little, which glTF's unlit surface would
+        not (a warning says so). Emits on both sides when doubleSided."""
+        self.emissive = True
+        self.warn(f"{mw}: KHR_materials_unlit rendered as a surface emitting its base colour "
+                  "(it also lights its surroundings, which an unlit glTF surface would not)")
+        unlit = {"name": out["name"], "_pointer": out["_pointer"], "type": "diffuse",
+                 "albedo": 0.0, "emission": out["albedo"]}
+        if isinstance(unlit["emission"], list) and max(unlit["emission"]) <= 0:
+            unlit["emission"] = [0.0, 0.0, 0.0]
+        if m.doubleSided:
+            unlit["twoSided"] = True
+        return unlit
+
+    def _specular_glossiness(self, sg, out, mw, sets):
+        """KHR_materials_pbrSpecularGlossiness, converted to metallic-roughness by the
+        conversion the Khronos sample viewer and Blender's importer use for factors
+        (solveMetallic: the metallic factor whose dielectric F0 of 0.04 and base colour
+        reproduce the diffuse and specular colours' perceived brightness; roughness = 1 -
+        glossiness). A diffuse texture stays the base colour's texture (its factor the
+        scale); the specular-glossiness texture is not converted per texel (a warning)."""
+        w = mw + "/extensions/KHR_materials_pbrSpecularGlossiness"
+        diffuse = np.array((sg.get("diffuseFactor") or [1, 1, 1, 1])[:3], float)
+        specular = np.array(sg.get("specularFactor") or [1, 1, 1], float)
+        gloss = float(sg.get("glossinessFactor", 1.0))
+        dielectric = 0.04
+
+        def brightness(c):
+            return float(np.sqrt(0.299 * c[0] ** 2 + 0.587 * c[1] ** 2 + 0.114 * c[2] ** 2))
+        one_minus = 1.0 - float(specular.max())
+        d, sp = brightness(diffuse), brightness(specular)
+        metallic = 0.0
+        if sp >= dielectric:
+            a = dielectric
+            b = d * one_minus / (1 - dielectric) + sp - 2 * dielectric
+            c = dielectric - sp
+            metallic = float(np.clip((-b + np.sqrt(max(b * b - 4 * a * c, 0.0))) / (2 * a),
+                                     0.0, 1.0))
+        from_diffuse = diffuse * one_minus / (1 - dielectric) / max(1 - metallic, 1e-4)
+        from_specular = (specular - dielectric * (1 - metallic)) / max(metallic, 1e-4)
+        base = np.clip(from_diffuse + (from_specular - from_diffuse) * metallic ** 2, 0, 1)
+        out["albedo"] = base.tolist()
+        out["metallic"] = metallic
+        out["roughness"] = float(np.clip(1.0 - gloss, 0.0, 1.0))
+        if sg.get("diffuseTexture") is not None:
+            out["albedo"] = self._texture(_info(sg["diffuseTexture"]), "sRGB", base.tolist(),
+                                          None, w + "/diffuseTexture", sets)
+        if sg.get("specularGlossinessTexture") is not None:
+            self.warn(f"{w}: specularGlossinessTexture is not converted per texel (its "
+                      "factors are)")
 
     def _extensions(self, ext, out, mw, sets):
         tr = ext.get("KHR_materials_transmission")

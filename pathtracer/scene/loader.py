@@ -81,6 +81,7 @@ class Material:
     albedo: tuple = ALBEDO_DEFAULT
     emission: tuple = EMISSION_DEFAULT
     two_sided: bool = False
+    one_sided: bool = False    # reflects on its front side only (black from behind)
     pointer: str = ""
     numbers: dict = field(default_factory=dict)    # principled number parameters
     textures: dict = field(default_factory=dict)   # parameter key -> TextureSpec
@@ -556,6 +557,7 @@ def _material(n, base):
     m.emission = _color_or_texture(n, "emission", EMISSION_DEFAULT, base, "sRGB", m,
                                    "emission", COLOR_LIMITS["emission"])
     m.two_sided = n.boolean("twoSided", False)
+    m.one_sided = n.boolean("oneSided", False)
     if mtype == "principled":
         if n.has("eta") and n.has("specular"):
             raise n.error("give 'specular' or 'eta', not both (each sets the other)", "eta")

@@ -7,6 +7,7 @@ substituted for ``$name`` in attribute values; ``<ref id>`` (``<ref name="bsdf" 
 names a BSDF declared at the top level. Anything outside the subset is a SceneError naming
 the element, never silently dropped; approximations give a warning.
 """
+import functools
 import io
 import math
 import os
@@ -692,7 +693,16 @@ def _number(r, tag_el, what):
 
 
 def _bsdf(r, el, name):
-    """The scene-format material of a Mitsuba BSDF element."""
+    """The scene-format material of a Mitsuba BSDF element. Mitsuba's reflective BSDFs
+    (diffuse, principled without transmission, conductors) are black from behind unless
+    wrapped in twosided: oneSided (checked against Mitsuba 3.9.1's evaluation)."""
+    mat = _bsdf_kind(r, el, name)
+    if el.get("type") != "twosided" and not mat.get("transmission"):
+        mat["oneSided"] = True
+    return mat
+
+
+def _bsdf_kind(r, el, name):
     kind = el.get("type")
     p = r.params(el)
     if kind == "twosided":
@@ -700,10 +710,11 @@ def _bsdf(r, el, name):
         if len(inner) != 1:
             raise r.error("twosided takes one BSDF (two different sides are not supported)",
                           el)
-        # our surfaces reflect on both sides anyway (a one-sided Mitsuba BSDF is black
-        # from behind: the one difference, documented); twoSided would only make an
-        # emitter emit on both sides, which a Mitsuba area emitter never does
-        return _bsdf(r, _deref(r, inner[0]), name)
+        # twoSided would make an emitter emit on both sides, which a Mitsuba area
+        # emitter never does: here only the BSDF reflects on both sides
+        mat = _bsdf(r, _deref(r, inner[0]), name)
+        mat.pop("oneSided", None)
+        return mat
     if kind == "diffuse":
         mat = {"name": name, "type": "diffuse"}
         if "reflectance" in p:
@@ -734,21 +745,65 @@ def _bsdf(r, el, name):
                          "specular_transmittance"))
         return mat
     if kind in ("conductor", "roughconductor"):
-        material = r.get(p, "material", "str", "none")
-        if material != "none" or "eta" in p or "k" in p:
-            raise r.error(f"{kind} with a complex index of refraction (material "
-                          f"{material!r}): not expressible exactly; use principled with "
-                          "metallic 1 and the metal's colour as base_color", el)
+        reflectance = r.get(p, "specular_reflectance", "color", [1.0] * 3)
+        f0 = _conductor_f0(r, el, p)
         mat = {"name": name, "type": "principled", "metallic": 1.0, "roughness": 0.0,
-               "albedo": r.get(p, "specular_reflectance", "color", 1.0)}
+               "albedo": [float(a * b) for a, b in zip(reflectance, f0)]}
         if kind == "roughconductor":
             mat["roughness"] = _roughness(r, el, p)
-        _only(r, el, p, ("material", "alpha", "distribution", "specular_reflectance"))
+        _only(r, el, p, ("material", "alpha", "distribution", "specular_reflectance", "eta",
+                         "k", "ext_eta"))
         return mat
     raise r.error(f"BSDF {kind!r} is not supported: diffuse, principled, dielectric, "
                   "roughdielectric, conductor and roughconductor with material='none', "
                   "twosided (plastic, roughplastic and others have no exact counterpart: "
                   "use principled)", el)
+
+
+@functools.lru_cache(maxsize=1)
+def conductor_table():
+    """{name: (eta rgb, k rgb)} of Mitsuba's named conductors (data/conductors.csv)."""
+    path = os.path.join(os.path.dirname(__file__), "data", "conductors.csv")
+    out = {}
+    with open(path) as f:
+        for line in f:
+            if line.strip() and not line.startswith("#"):
+                name, *v = line.strip().split(",")
+                out[name] = (np.array(v[:3], float), np.array(v[3:], float))
+    return out
+
+
+def _conductor_f0(r, el, p):
+    """The reflectance at normal incidence of a conductor's complex index of refraction
+    eta + i k (relative to ext_eta), per channel: ((n - 1)^2 + k^2) / ((n + 1)^2 + k^2).
+    Mitsuba's named materials (its RGB values of their spectral data), or eta and k
+    given; 'none' (the default) is a perfect mirror. The principled BSDF's metallic lobe
+    then blends to white at grazing angles by Schlick's rule, where Mitsuba evaluates
+    the exact conductor Fresnel equations: an approximation, said in a warning (a few
+    per cent at intermediate angles; equal at normal and grazing incidence)."""
+    material = r.get(p, "material", "str", "none")
+    if material == "none" and "eta" not in p and "k" not in p:
+        return [1.0, 1.0, 1.0]
+    if "eta" in p or "k" in p:
+        if material != "none":
+            raise r.error("give a conductor's material or its eta and k, not both", el)
+        eta = np.array(r.get(p, "eta", "color", [0.0] * 3))
+        k = np.array(r.get(p, "k", "color", [1.0] * 3))
+        what = "eta and k"
+    else:
+        table = conductor_table()
+        if material not in table:
+            raise r.error(f"conductor material {material!r}: not one of Mitsuba's "
+                          f"({', '.join(sorted(table))})", el)
+        eta, k = table[material]
+        what = f"material {material!r}"
+    ext = _ior(r, p, "ext_eta", 1.0)
+    n, kk = eta / ext, k / ext
+    f0 = ((n - 1) ** 2 + kk ** 2) / ((n + 1) ** 2 + kk ** 2)
+    r.warn(f"{el.get('type')} {what}: approximated by the principled BSDF's metallic lobe "
+           f"with the reflectance at normal incidence, {np.round(f0, 4).tolist()} (Schlick's "
+           "Fresnel where Mitsuba evaluates the conductor's exact one)", el)
+    return [float(x) for x in np.clip(f0, 0.0, 1.0)]
 
 
 def _only(r, el, p, allowed):
