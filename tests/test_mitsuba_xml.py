@@ -178,8 +178,8 @@ def test_area_emitter_gets_its_own_material(tmp_path):
 
 
 @pytest.mark.parametrize("body, message", [
-    ('<bsdf type="plastic" id="p"/>' '<shape type="cube"><ref id="p"/></shape>',
-     "BSDF 'plastic' is not supported"),
+    ('<bsdf type="pplastic" id="p"/>' '<shape type="cube"><ref id="p"/></shape>',
+     "BSDF 'pplastic' is not supported"),
     ('<shape type="cylinder"/>', "shape 'cylinder' is not supported"),
     ('<shape type="cube"><ref id="nope"/></shape>', "no BSDF with that id"),
     ('<shape type="cube"><bsdf type="conductor"><string name="material" value="Xx"/></bsdf>'
@@ -450,3 +450,28 @@ def test_spectrum_conversion_matches_mitsubas_own():
             theirs = np.array(mi.spectrum_list_to_srgb(w.tolist(), v.tolist(), not emitter,
                                                        not emitter))
             assert np.allclose(spectrum_to_rgb(w, v, emitter), theirs, rtol=1e-4, atol=1e-6)
+
+
+def test_plastic_and_beckmann_are_approximated_with_warnings(tmp_path):
+    """plastic/roughplastic: the principled BSDF at the coat's F0 (eta 1.49: F0 0.0387,
+    specular 0.484) with the base's reflectance scaled by Mitsuba's internal scattering at
+    normal incidence, (1 - F0)^2 / eta^2 / (1 - F_dr), F_dr = 0.5907 (Mitsuba's
+    fresnel_diffuse_reflectance(1 / 1.49)); Mitsuba's default Beckmann as GGX. Each with a
+    warning."""
+    body = SENSOR + """<shape type="cube"><bsdf type="roughplastic">
+      <rgb name="diffuse_reflectance" value="0.5 0.25 0.1"/><float name="alpha" value="0.09"/>
+      </bsdf></shape>
+      <shape type="cube"><bsdf type="plastic"><boolean name="nonlinear" value="true"/>
+      </bsdf></shape>"""
+    d, warnings = convert_file(write(tmp_path, body))
+    rough, smooth = d["materials"]
+    eta, f_dr = 1.49 / 1.000277, 0.5907325
+    f0 = ((eta - 1) / (eta + 1)) ** 2
+    scale = (1 - f0) ** 2 / eta ** 2 / (1 - f_dr)
+    assert rough["specular"] == pytest.approx(f0 / 0.08, rel=1e-3)
+    assert np.allclose(rough["albedo"], np.array([0.5, 0.25, 0.1]) * scale, rtol=2e-3)
+    assert rough["roughness"] == pytest.approx(0.3) and smooth["roughness"] == 0
+    assert smooth["albedo"][0] == pytest.approx(0.5 * (1 - f0) ** 2 / eta ** 2 /
+                                                (1 - 0.5 * f_dr), rel=2e-3)
+    assert any("Beckmann" in w for w in warnings)
+    assert sum("approximated by the principled BSDF" in w for w in warnings) == 2

@@ -754,10 +754,60 @@ def _bsdf_kind(r, el, name):
         _only(r, el, p, ("material", "alpha", "distribution", "specular_reflectance", "eta",
                          "k", "ext_eta"))
         return mat
+    if kind in ("plastic", "roughplastic"):
+        return _plastic(r, el, p, name, kind)
     raise r.error(f"BSDF {kind!r} is not supported: diffuse, principled, dielectric, "
-                  "roughdielectric, conductor and roughconductor with material='none', "
-                  "twosided (plastic, roughplastic and others have no exact counterpart: "
-                  "use principled)", el)
+                  "roughdielectric, thindielectric, conductor, roughconductor, plastic, "
+                  "roughplastic, twosided", el)
+
+
+def _fresnel_dielectric(cos_i, eta):
+    """Unpolarised Fresnel reflectance of light meeting an interface of relative index
+    eta (transmitted side over incident side) at cos_i (numpy arrays); 1 where it is
+    totally reflected."""
+    sin2_t = (1 - cos_i ** 2) / eta ** 2
+    cos_t = np.sqrt(np.clip(1 - sin2_t, 0, None))
+    rs = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
+    rp = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
+    return np.where(sin2_t >= 1, 1.0, 0.5 * (rs ** 2 + rp ** 2))
+
+
+def _diffuse_fresnel(eta, n=20000):
+    """The cosine-weighted hemispherical average of the Fresnel reflectance (Mitsuba's
+    fresnel_diffuse_reflectance): 2 * integral of F(cos) cos d(cos)."""
+    c = (np.arange(n) + 0.5) / n
+    return float(2 * np.mean(_fresnel_dielectric(c, eta) * c))
+
+
+def _plastic(r, el, p, name, kind):
+    """Mitsuba's plastic and roughplastic: a diffuse base under a dielectric coat. Here the
+    principled BSDF approximates it (a warning): its specular lobe with the coat's
+    reflectance at normal incidence F0 (specular = F0 / 0.08; GGX of the same alpha,
+    smooth for plastic), and its diffuse lobe with the base's reflectance scaled as
+    Mitsuba scales it at normal incidence: (1 - F0)^2 / eta^2 / (1 - F_dr) (nonlinear:
+    / (1 - rho F_dr)), F_dr the coat's internal diffuse Fresnel reflectance. Burley's
+    diffuse and Schlick's Fresnel then differ from Mitsuba's (1 - F) transmission terms
+    away from normal incidence."""
+    eta = _ior(r, p, "int_ior", 1.49) / _ior(r, p, "ext_ior", 1.000277)
+    rho = r.get(p, "diffuse_reflectance", "color", [0.5] * 3)
+    if "diffuse_reflectance" in p and p["diffuse_reflectance"][0] in ("texture", "ref"):
+        raise r.error(f"{kind}: a textured diffuse_reflectance is not supported", el)
+    spec = r.get(p, "specular_reflectance", "color", [1.0] * 3)
+    nonlinear = r.get(p, "nonlinear", "bool", False)
+    f0 = ((eta - 1) / (eta + 1)) ** 2
+    f_dr = _diffuse_fresnel(1 / eta)
+    rho = np.asarray(rho, float)
+    scale = (1 - f0) ** 2 / eta ** 2 / ((1 - rho * f_dr) if nonlinear else (1 - f_dr))
+    mat = {"name": name, "type": "principled", "metallic": 0.0,
+           "albedo": [float(x) for x in np.clip(rho * scale, 0, 1)],
+           "specular": float(min(1.0, f0 / 0.08 * float(np.mean(spec)))),
+           "roughness": _roughness(r, el, p) if kind == "roughplastic" else 0.0}
+    _only(r, el, p, ("int_ior", "ext_ior", "diffuse_reflectance", "specular_reflectance",
+                     "nonlinear", "alpha", "distribution", "sample_visible"))
+    r.warn(f"{kind} approximated by the principled BSDF (its specular lobe at the coat's "
+           f"F0 = {f0:.4f}, its diffuse lobe with the base's reflectance x {float(np.mean(scale)):.3f}, "
+           "Mitsuba's internal scattering at normal incidence)", el)
+    return mat
 
 
 @functools.lru_cache(maxsize=1)
@@ -829,9 +879,15 @@ def _ior(r, p, key, default):
 
 
 def _roughness(r, el, p):
-    """Mitsuba's GGX alpha -> the principled roughness (alpha = roughness^2)."""
-    if "distribution" in p and r.get(p, "distribution", "str") != "ggx":
-        raise r.error("only the GGX microfacet distribution is supported", el)
+    """Mitsuba's microfacet alpha -> the principled roughness (alpha = roughness^2); its
+    default distribution, Beckmann, is rendered as GGX of the same alpha (a warning)."""
+    # (Mitsuba's default distribution is Beckmann)
+    dist = r.get(p, "distribution", "str", "beckmann")
+    if dist not in ("ggx", "beckmann"):
+        raise r.error(f"microfacet distribution {dist!r}: expected ggx or beckmann", el)
+    if dist == "beckmann":
+        r.warn("the Beckmann distribution is rendered as GGX with the same alpha (the "
+               "principled BSDF's; GGX has the longer tails)", el)
     if "alpha_u" in p or "alpha_v" in p:
         raise r.error("anisotropic alpha_u/alpha_v: not supported here (principled's "
                       "anisotropic is)", el)
