@@ -180,7 +180,7 @@ def test_area_emitter_gets_its_own_material(tmp_path):
 @pytest.mark.parametrize("body, message", [
     ('<bsdf type="pplastic" id="p"/>' '<shape type="cube"><ref id="p"/></shape>',
      "BSDF 'pplastic' is not supported"),
-    ('<shape type="cylinder"/>', "shape 'cylinder' is not supported"),
+    ('<shape type="bsplinecurve"/>', "shape 'bsplinecurve' is not supported"),
     ('<shape type="cube"><ref id="nope"/></shape>', "no BSDF with that id"),
     ('<shape type="cube"><bsdf type="conductor"><string name="material" value="Xx"/></bsdf>'
      '</shape>', "not one of Mitsuba's"),
@@ -475,3 +475,23 @@ def test_plastic_and_beckmann_are_approximated_with_warnings(tmp_path):
                                                 (1 - 0.5 * f_dr), rel=2e-3)
     assert any("Beckmann" in w for w in warnings)
     assert sum("approximated by the principled BSDF" in w for w in warnings) == 2
+
+
+def test_disk_and_cylinder_are_tessellated_facing_out(tmp_path):
+    """Mitsuba's disk (the unit disk at z = 0 facing +z) and open cylinder (radius, p0, p1,
+    facing outward unless flip_normals): tessellated, with their area and sidedness."""
+    body = SENSOR + """<shape type="disk"/>
+      <shape type="cylinder"><float name="radius" value="0.5"/><point name="p0" value="0,0,0"/>
+      <point name="p1" value="0,2,0"/></shape>"""
+    d, warnings = convert_file(write(tmp_path, body))
+    disk, tube = d["objects"]
+    for obj, area, outward in ((disk, math.pi, None), (tube, 2 * math.pi * 0.5 * 2, True)):
+        v = np.array(obj["vertices"])[np.array(obj["faces"])]
+        n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+        assert 0.5 * np.linalg.norm(n, axis=1).sum() == pytest.approx(area, rel=2e-3)
+        if outward:
+            radial = v.mean(1) * [1, 0, 1]        # the tube's axis is +y
+            assert (np.einsum("ij,ij->i", n, radial) > 0).all()
+        else:
+            assert (n[:, 2] > 0).all()
+    assert sum("tessellated" in w for w in warnings) == 2

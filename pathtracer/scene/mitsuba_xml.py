@@ -961,15 +961,50 @@ def _shape(r, el, out, materials):
         local[:3, 3] = center
         m = m @ local
         r.warn(f"sphere tessellated into {len(f):,} triangles (smooth normals)", el)
+    elif kind == "disk":
+        # Mitsuba's disk: the unit disk at z = 0 facing +z (to_world scales it): a fan
+        ring = 2 * np.pi * np.arange(DISK_SEGMENTS) / DISK_SEGMENTS
+        obj["vertices"] = [[0.0, 0.0, 0.0]] + [[float(np.cos(a)), float(np.sin(a)), 0.0]
+                                               for a in ring]
+        obj["faces"] = [[0, 1 + k, 1 + (k + 1) % DISK_SEGMENTS] for k in range(DISK_SEGMENTS)]
+        r.warn(f"disk tessellated into {DISK_SEGMENTS} triangles", el)
+    elif kind == "cylinder":
+        # Mitsuba's cylinder: an open tube of `radius` from p0 to p1 (default the unit
+        # tube along +z), facing outward; tessellated with smooth normals
+        radius = r.get(p, "radius", "float", 1.0)
+        p0 = np.array(r.get(p, "p0", "point", [0.0, 0.0, 0.0]), float)
+        p1 = np.array(r.get(p, "p1", "point", [0.0, 0.0, 1.0]), float)
+        axis = p1 - p0
+        if not (radius > 0 and np.linalg.norm(axis) > 0):
+            raise r.error("cylinder: radius and length must be > 0", el)
+        w = axis / np.linalg.norm(axis)
+        u = np.cross(w, [1.0, 0, 0] if abs(w[0]) < 0.9 else [0, 1.0, 0])
+        u /= np.linalg.norm(u)
+        v_ = np.cross(w, u)
+        ring = 2 * np.pi * np.arange(DISK_SEGMENTS) / DISK_SEGMENTS
+        circle = [radius * (np.cos(a) * u + np.sin(a) * v_) for a in ring]
+        verts = [p0 + c for c in circle] + [p1 + c for c in circle]
+        n = DISK_SEGMENTS
+        faces = []
+        for k in range(n):
+            a0, a1, b0, b1 = k, (k + 1) % n, n + k, n + (k + 1) % n
+            faces += [[a0, a1, b1], [a0, b1, b0]]
+        if r.get(p, "flip_normals", "bool", False):
+            faces = [[a, c, b] for a, b, c in faces]
+        obj["vertices"], obj["faces"] = [x.tolist() for x in verts], faces
+        obj["smooth"] = True
+        r.warn(f"cylinder tessellated into {len(faces)} triangles (smooth normals; no caps, "
+               "as Mitsuba's)", el)
     else:
         raise r.error(f"shape {kind!r} is not supported (obj, ply, serialized, rectangle, "
-                      "cube, sphere)",
+                      "cube, sphere, disk, cylinder)",
                       el)
     for k in p:
         if p[k][0] in ("ref", "bsdf", "emitter"):
             continue        # <ref name="bsdf" id=...>: read below
         if k not in ("filename", "face_normals", "to_world", "radius", "center",
-                     "shape_index"):
+                     "shape_index", "p0", "p1") and not (k == "flip_normals" and
+                                                          kind == "cylinder"):
             if k == "flip_normals":
                 raise r.error("flip_normals is not supported", p[k][1])
             r.warn(f"shape parameter {k!r} ignored", p[k][1])
@@ -1005,6 +1040,8 @@ def _shape(r, el, out, materials):
     obj["material"] = name
     out["objects"].append(obj)
 
+
+DISK_SEGMENTS = 128      # triangles of a tessellated disk, segments of a cylinder
 
 # Mitsuba's default BSDF: diffuse with reflectance 0.5
 _DEFAULT_BSDF = ET.Element("bsdf", {"type": "diffuse", "id": "default-diffuse"})
