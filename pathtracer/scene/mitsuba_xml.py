@@ -789,17 +789,23 @@ def _plastic(r, el, p, name, kind):
     diffuse and Schlick's Fresnel then differ from Mitsuba's (1 - F) transmission terms
     away from normal incidence."""
     eta = _ior(r, p, "int_ior", 1.49) / _ior(r, p, "ext_ior", 1.000277)
-    rho = r.get(p, "diffuse_reflectance", "color", [0.5] * 3)
+    texture = None
     if "diffuse_reflectance" in p and p["diffuse_reflectance"][0] in ("texture", "ref"):
-        raise r.error(f"{kind}: a textured diffuse_reflectance is not supported", el)
+        texture = _rgb_or_texture(r, el, p["diffuse_reflectance"])
+    rho = [0.5] * 3 if texture is not None and isinstance(texture, dict) else \
+        r.get(p, "diffuse_reflectance", "color", [0.5] * 3) if texture is None else texture
     spec = r.get(p, "specular_reflectance", "color", [1.0] * 3)
     nonlinear = r.get(p, "nonlinear", "bool", False)
     f0 = ((eta - 1) / (eta + 1)) ** 2
     f_dr = _diffuse_fresnel(1 / eta)
     rho = np.asarray(rho, float)
     scale = (1 - f0) ** 2 / eta ** 2 / ((1 - rho * f_dr) if nonlinear else (1 - f_dr))
-    mat = {"name": name, "type": "principled", "metallic": 0.0,
-           "albedo": [float(x) for x in np.clip(rho * scale, 0, 1)],
+    albedo = [float(x) for x in np.clip(rho * scale, 0, 1)]
+    if isinstance(texture, dict):
+        # a texture's texels scaled alike (nonlinear: by the factor of a mid-grey texel)
+        texture["scale"] = [float(x) for x in np.broadcast_to(scale, 3)]
+        albedo = texture
+    mat = {"name": name, "type": "principled", "metallic": 0.0, "albedo": albedo,
            "specular": float(min(1.0, f0 / 0.08 * float(np.mean(spec)))),
            "roughness": _roughness(r, el, p) if kind == "roughplastic" else 0.0}
     _only(r, el, p, ("int_ior", "ext_ior", "diffuse_reflectance", "specular_reflectance",
