@@ -342,6 +342,12 @@ class Features(NamedTuple):
     wrap_modes: bool = False   # a texture that mirrors or clamps (else all repeat)
     mipmaps: bool = False      # a mip-mapped (trilinear) texture: ray cones are traced
     light_tree: bool = False   # lights picked by the light tree (else by power alone)
+    # emitters seen directly by the camera are not shown (Mitsuba's hide_emitters: camera
+    # rays that escape or reach an emissive surface add nothing; seen in a mirror or through
+    # glass they are)
+    hide_emitters: bool = False
+    vertex_colors: bool = False   # per-vertex colours multiply the base colour (tri_col)
+    one_sided: bool = False       # a material that is black from behind (oneSided)
     # The principled parameters some material sets above 0 (or textures): the BSDF's parts
     # that need them are compiled only then (kernels.principled.Lobes). True by default:
     # a feature set built without them compiles the whole BSDF. dielectric: some principled
@@ -353,12 +359,6 @@ class Features(NamedTuple):
     flatness: bool = True      # the scene's "subsurface"
     spec_tint: bool = True
     anisotropic: bool = True
-    # emitters seen directly by the camera are not shown (Mitsuba's hide_emitters: camera
-    # rays that escape or reach an emissive surface add nothing; seen in a mirror or through
-    # glass they are)
-    hide_emitters: bool = False
-    vertex_colors: bool = False   # per-vertex colours multiply the base colour (tri_col)
-    one_sided: bool = False       # a material that is black from behind (oneSided)
 
 
 class Specialisation(NamedTuple):
