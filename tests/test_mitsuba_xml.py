@@ -495,3 +495,30 @@ def test_disk_and_cylinder_are_tessellated_facing_out(tmp_path):
         else:
             assert (n[:, 2] > 0).all()
     assert sum("tessellated" in w for w in warnings) == 2
+
+
+def test_parameters_from_the_command_line_and_path_folders(tmp_path):
+    """-D name=value (load_scene's params) sets $name over <default>, in any attribute (a
+    type too); <path> folders are searched for the files a scene names."""
+    from pathtracer.cli import build_parser
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "tri.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    body = """<default name="w" value="8"/><default name="kind" value="direct"/>
+      <path value="meshes"/>
+      <integrator type="$kind"/>
+      <sensor type="perspective"><transform name="to_world"><lookat origin="0,0,3"
+        target="0,0,0" up="0,1,0"/></transform><film type="hdrfilm">
+        <integer name="width" value="$w"/><integer name="height" value="4"/></film></sensor>
+      <shape type="obj"><string name="filename" value="tri.obj"/></shape>"""
+    path = write(tmp_path, body)
+    s = pt.load_scene(path)
+    assert s.data["camera"]["resolution"] == [8, 4] and s.data["render"]["maxBounces"] == 1
+    assert s.data["objects"][0]["file"] == str(tmp_path / "meshes" / "tri.obj")
+    s = pt.load_scene(path, params={"w": 16, "kind": "path"})
+    assert s.data["camera"]["resolution"] == [16, 4] and s.data["render"]["maxBounces"] == 64
+    args = build_parser().parse_args([path, "-D", "w=16", "--define", "kind=path"])
+    assert dict(args.define) == {"w": "16", "kind": "path"}
+    with pytest.raises(SystemExit):
+        build_parser().parse_args([path, "-D", "nothing"])
+    with pytest.raises(pt.SceneError, match="for Mitsuba XML scenes"):
+        pt.load_scene(os.path.join(ROOT, "scenes", "cornell-box.json"), params={"a": 1})
