@@ -522,3 +522,16 @@ def test_parameters_from_the_command_line_and_path_folders(tmp_path):
         build_parser().parse_args([path, "-D", "nothing"])
     with pytest.raises(pt.SceneError, match="for Mitsuba XML scenes"):
         pt.load_scene(os.path.join(ROOT, "scenes", "cornell-box.json"), params={"a": 1})
+
+
+def test_normalmap_bsdf_gives_its_nested_material_a_normal_map(tmp_path):
+    body = SENSOR + """<shape type="cube"><bsdf type="normalmap">
+      <texture name="normalmap" type="bitmap"><boolean name="raw" value="true"/>
+      <string name="filename" value="n.png"/></texture>
+      <bsdf type="roughconductor"><float name="alpha" value="0.04"/>
+      <string name="distribution" value="ggx"/></bsdf></bsdf></shape>"""
+    d, warnings = convert_file(write(tmp_path, body))
+    m = d["materials"][0]
+    assert m["metallic"] == 1 and m["roughness"] == pytest.approx(0.2)
+    assert m["normalMap"]["texture"].endswith("n.png")
+    assert m["normalMap"]["colorSpace"] == "linear" and m["oneSided"]

@@ -756,6 +756,26 @@ def _bsdf_kind(r, el, name):
         return mat
     if kind in ("plastic", "roughplastic"):
         return _plastic(r, el, p, name, kind)
+    if kind == "normalmap":
+        # a tangent-space normal map (a raw bitmap, 2c - 1 per channel) over its nested BSDF
+        inner = [c for c in el if c.tag in ("bsdf", "ref")]
+        if len(inner) != 1 or "normalmap" not in p:
+            raise r.error("normalmap takes one nested BSDF and a 'normalmap' texture", el)
+        mat = _bsdf(r, _deref(r, inner[0]), name)
+        tex = _rgb_or_texture(r, el, p["normalmap"])
+        if not isinstance(tex, dict):
+            raise r.error("normalmap: the 'normalmap' must be a bitmap texture", el)
+        tex["colorSpace"] = "linear"
+        mat["normalMap"] = tex
+        if mat.get("type") == "diffuse":
+            # (normal maps are read by the principled material; a Lambertian one is its
+            # diffuse lobe with the retro-reflection off: roughness 0, specular 0)
+            mat = {"name": name, "type": "principled", "albedo": mat.get("albedo", 0.5),
+                   "roughness": 0.0, "specular": 0.0, "metallic": 0.0,
+                   "normalMap": tex, **({"oneSided": True} if mat.get("oneSided") else {})}
+            r.warn("normalmap over a diffuse BSDF: rendered by the principled BSDF's diffuse "
+                   "lobe (Burley's, a little darker than Lambert's at grazing angles)", el)
+        return mat
     raise r.error(f"BSDF {kind!r} is not supported: diffuse, principled, dielectric, "
                   "roughdielectric, thindielectric, conductor, roughconductor, plastic, "
                   "roughplastic, twosided", el)
