@@ -535,3 +535,15 @@ def test_normalmap_bsdf_gives_its_nested_material_a_normal_map(tmp_path):
     assert m["metallic"] == 1 and m["roughness"] == pytest.approx(0.2)
     assert m["normalMap"]["texture"].endswith("n.png")
     assert m["normalMap"]["colorSpace"] == "linear" and m["oneSided"]
+
+
+def test_anisotropic_roughconductor_maps_to_principled_anisotropy(tmp_path):
+    """alpha_u, alpha_v -> roughness^2 = sqrt(au av) and anisotropic with sqrt(1 - 0.9 a) =
+    sqrt(av / au): the principled lobe's alphas are then exactly au and av."""
+    body = SENSOR + """<shape type="cube"><bsdf type="roughconductor">
+      <float name="alpha_u" value="0.2"/><float name="alpha_v" value="0.05"/>
+      <string name="distribution" value="ggx"/></bsdf></shape>"""
+    m = convert_file(write(tmp_path, body))[0]["materials"][0]
+    r2 = m["roughness"] ** 2
+    aspect = math.sqrt(1 - 0.9 * m["anisotropic"])
+    assert r2 / aspect == pytest.approx(0.2) and r2 * aspect == pytest.approx(0.05)

@@ -749,10 +749,12 @@ def _bsdf_kind(r, el, name):
         f0 = _conductor_f0(r, el, p)
         mat = {"name": name, "type": "principled", "metallic": 1.0, "roughness": 0.0,
                "albedo": [float(a * b) for a, b in zip(reflectance, f0)]}
-        if kind == "roughconductor":
+        if kind == "roughconductor" and ("alpha_u" in p or "alpha_v" in p):
+            mat["roughness"], mat["anisotropic"] = _anisotropic_roughness(r, el, p)
+        elif kind == "roughconductor":
             mat["roughness"] = _roughness(r, el, p)
         _only(r, el, p, ("material", "alpha", "distribution", "specular_reflectance", "eta",
-                         "k", "ext_eta"))
+                         "k", "ext_eta", "alpha_u", "alpha_v"))
         return mat
     if kind in ("plastic", "roughplastic"):
         return _plastic(r, el, p, name, kind)
@@ -915,12 +917,30 @@ def _roughness(r, el, p):
         r.warn("the Beckmann distribution is rendered as GGX with the same alpha (the "
                "principled BSDF's; GGX has the longer tails)", el)
     if "alpha_u" in p or "alpha_v" in p:
-        raise r.error("anisotropic alpha_u/alpha_v: not supported here (principled's "
-                      "anisotropic is)", el)
+        raise r.error("anisotropic alpha_u/alpha_v: supported on roughconductor only", el)
     alpha = _number(r, p["alpha"], "alpha") if "alpha" in p else 0.1
     if not 0 <= alpha <= 1:
         raise r.error(f"alpha {alpha} outside [0, 1]", el)
     return math.sqrt(alpha)
+
+
+def _anisotropic_roughness(r, el, p):
+    """(roughness, anisotropic) of the principled BSDF for Mitsuba's alpha_u, alpha_v."""
+    _roughness(r, el, {k: v for k, v in p.items() if k not in ("alpha_u", "alpha_v")})
+    au = _number(r, p["alpha_u"], "alpha_u") if "alpha_u" in p else 0.1
+    av = _number(r, p["alpha_v"], "alpha_v") if "alpha_v" in p else 0.1
+    if not (0 < au <= 1 and 0 < av <= 1):
+        raise r.error(f"alpha_u {au:g}, alpha_v {av:g}: expected (0, 1]", el)
+    # the principled lobe's alphas along the tangent (dp/du, as Mitsuba's frame) and the
+    # bitangent: roughness^2 / aspect and roughness^2 x aspect, aspect = sqrt(1 - 0.9
+    # anisotropic): so roughness^2 = sqrt(au av), aspect^2 = av / au, which needs av <= au
+    # and av / au >= 0.1 (else clamped, with a warning)
+    ratio = av / au
+    if not 0.1 <= ratio <= 1:
+        r.warn(f"alpha_v / alpha_u = {ratio:.3g}: the principled BSDF's anisotropy "
+               "stretches along the tangent by up to 1 / 0.1; clamped", el)
+        ratio = min(max(ratio, 0.1), 1.0)
+    return math.sqrt(math.sqrt(au * av)), (1 - ratio) / 0.9
 
 
 def _deref(r, el):
