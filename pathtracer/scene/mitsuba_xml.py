@@ -936,10 +936,13 @@ def _anisotropic_roughness(r, el, p):
     # anisotropic): so roughness^2 = sqrt(au av), aspect^2 = av / au, which needs av <= au
     # and av / au >= 0.1 (else clamped, with a warning)
     ratio = av / au
-    if not 0.1 <= ratio <= 1:
+    if ratio > 1 + 1e-6:
+        raise r.error(f"alpha_v {av:g} > alpha_u {au:g}: the principled BSDF stretches its "
+                      "lobe along the tangent (dp/du) only; not expressible", el)
+    if ratio < 0.1:
         r.warn(f"alpha_v / alpha_u = {ratio:.3g}: the principled BSDF's anisotropy "
                "stretches along the tangent by up to 1 / 0.1; clamped", el)
-        ratio = min(max(ratio, 0.1), 1.0)
+        ratio = 0.1
     return math.sqrt(math.sqrt(au * av)), (1 - ratio) / 0.9
 
 
