@@ -7,7 +7,8 @@ Each scene file (a folder: every Mitsuba scene file below it that both renderers
 rendered at a small size (its film's width scaled to ``--size`` pixels, the aspect kept;
 written to a temporary copy beside the file, so relative paths still resolve) by Mitsuba 3
 (``llvm_ad_rgb``, ``--mi-spp`` samples, the reference) and by pt-render on the CPU
-(``--spp`` samples). Reported per file: the channel means of both and their ratio, the relMSE
+(``--spp`` samples). (A film declared in an ``<include>``d file keeps its own size: the
+material-preview scenes of Mitsuba's documentation render at 960 x 720.) Reported per file: the channel means of both and their ratio, the relMSE
 of ours against Mitsuba's and the reference's own noise (relMSE of two independent Mitsuba
 renders of half its samples each, halved: an estimate of the reference's error), and
 pt-render's warnings. A file agrees when every channel mean is within 1 % (or within 3
