@@ -66,7 +66,7 @@ def _full_feature_scene(tmp_path):
     rng = np.random.default_rng(0)
     iio.imwrite(tmp_path / "a.png", rng.integers(0, 255, (8, 8, 3), dtype=np.uint8))
     iio.imwrite(tmp_path / "n.png", np.full((4, 4, 3), [128, 160, 230], np.uint8))
-    write_image(str(tmp_path / "sky.hdr"), rng.random((16, 32, 3)).astype(np.float32) * 3)
+    np.save(tmp_path / "sky.npy", rng.random((16, 32, 3)).astype(np.float32) * 3)
     obj = tmp_path / "quad.obj"
     obj.write_text("v -3 -1 -3\nv 3 -1 -3\nv 3 -1 3\nv -3 -1 3\nvt 0 0\nvt 4 0\nvt 4 4\n"
                    "vt 0 4\nvn 0 1 0\nf 1/1/1 4/4/1 3/3/1\nf 1/1/1 3/3/1 2/2/1\n")
@@ -91,7 +91,7 @@ def _full_feature_scene(tmp_path):
              "specularTint": 0.5, "subsurface": 0.3},
             {"name": "glass", "transmission": 1, "roughness": 0.1, "eta": 1.5,
              "clearcoat": 0.5, "sheen": 0.3},
-            {"name": "lamp", "type": "diffuse", "albedo": 0, "emission": 4}],
+            {"name": "lamp", "type": "diffuse", "albedo": 0, "emission": 4, "oneSided": True}],
         "objects": [
             {"name": "floor", "file": "quad.obj", "material": "floor"},
             {"name": "ball", "vertices": v, "faces": f, "material": "glass", "smooth": True},
@@ -99,7 +99,7 @@ def _full_feature_scene(tmp_path):
              "transform": {"translate": [2, 2, 0], "scale": 0.3}},
             {"name": "coloured", "file": "vc.glb"}],
         "lights": [{"position": [-2, 3, 1], "intensity": 5}],
-        "environment": {"file": "sky.hdr",
+        "environment": {"file": "sky.npy",
                         "matrix": [[1, 0, 0], [0, c, -s_], [0, s_, c]]},     # tilted about X
     }
     from pathtracer.scene import load_scene
