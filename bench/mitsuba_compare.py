@@ -16,17 +16,15 @@ standard errors of the difference of the two means) and relMSE is within the noi
 both renders (see ``agrees``).
 """
 import argparse
-import json
 import os
 import sys
 import tempfile
-import time
 import warnings
 import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from .common import machine, versions
+from .common import write_record
 from .scene_survey import scene_files
 
 
@@ -168,11 +166,7 @@ def main(argv=None):
     n_ok = sum(r["agrees"] for r in rows)
     print(f"\n{len(rows)} files rendered by both; {n_ok} agree")
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump({"command": "python -m bench.mitsuba_compare " + " ".join(
-                sys.argv[1:] if argv is None else argv), "machine": machine(),
-                "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-                "versions": versions(), "files": rows}, f, indent=1)
+        write_record(args.json, files=rows)
     return 0
 
 

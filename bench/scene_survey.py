@@ -13,7 +13,6 @@ loads must load").
 """
 import argparse
 import collections
-import json
 import os
 import re
 import sys
@@ -21,7 +20,7 @@ import time
 import warnings
 import xml.etree.ElementTree as ET
 
-from .common import machine, versions
+from .common import write_record
 
 
 def scene_files(folders):
@@ -111,11 +110,7 @@ def main(argv=None):
     for msg, n in groups.most_common():
         print(f"{n:4d}  {msg}")
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump({"command": "python -m bench.scene_survey " + " ".join(
-                sys.argv[1:] if argv is None else argv), "machine": machine(),
-                "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-                "versions": versions(), "files": rows}, f, indent=1)
+        write_record(args.json, files=rows)
     return 0
 
 

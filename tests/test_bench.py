@@ -1,6 +1,8 @@
 """The benchmark's metrics and its quick mode (a tiny run, as CI runs it)."""
 import csv
+import json
 import math
+import os
 import subprocess
 import sys
 
@@ -490,7 +492,9 @@ def test_bench_scripts_refuse_bad_arguments_in_one_line():
                  ["bench.ab", "throughput", "--trees", ".", ".", "--blocks", "3"],
                  ["bench.denoise_budget", "--first", "3"],
                  ["bench.denoise_budget", "--step", "0"],
-                 ["bench.denoise_budget", "--seeds", "0"]):
+                 ["bench.denoise_budget", "--seeds", "0"],
+                 ["bench.scene_survey", "/no/such/folder"],
+                 ["bench.mitsuba_compare", ".", "--size", "2"]):
         r = subprocess.run([sys.executable, "-m", *args], cwd=ROOT, capture_output=True,
                            text=True, timeout=120)
         assert r.returncode == 2, (args, r.stderr)
@@ -526,3 +530,26 @@ def test_denoise_budget_spends_the_mean_spp_where_the_halves_disagree():
     expect[noisy] = 400.0 / count[noisy]
     np.testing.assert_allclose(img[..., 0], expect, rtol=1e-6)
     assert (max3x3(np.eye(3)) == 1).all() and max3x3(np.zeros((2, 2))).max() == 0
+
+
+def test_scene_survey_counts_what_loads_and_groups_what_stops(tmp_path):
+    """bench.scene_survey: every <scene> file below the folder loaded; the errors grouped by
+    their message; files that are not scenes left out; a JSON record."""
+    sensor = ('<sensor type="perspective"><transform name="to_world"><lookat origin="0,0,3" '
+              'target="0,0,0" up="0,1,0"/></transform><film type="hdrfilm"><integer '
+              'name="width" value="4"/><integer name="height" value="4"/></film></sensor>')
+    (tmp_path / "ok.xml").write_text(f'<scene version="3.0.0">{sensor}<shape type="cube"/>'
+                                     '</scene>')
+    for k in range(2):
+        (tmp_path / f"bad{k}.xml").write_text(f'<scene version="3.0.0">{sensor}<shape '
+                                              'type="bsplinecurve"/></scene>')
+    (tmp_path / "other.xml").write_text("<html/>")
+    out = tmp_path / "survey.json"
+    r = subprocess.run([sys.executable, "-m", "bench.scene_survey", str(tmp_path), "--json",
+                        str(out)], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "3 scene files" in r.stdout and "pt-render loads 1" in r.stdout, r.stdout
+    assert "   2  shape … is not supported" in r.stdout, r.stdout
+    rows = json.load(open(out))["files"]
+    assert sorted(os.path.basename(x["file"]) for x in rows) == ["bad0.xml", "bad1.xml",
+                                                                 "ok.xml"]

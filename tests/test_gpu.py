@@ -61,7 +61,6 @@ def _full_feature_scene(tmp_path):
     normals, a thin lens, vertex colours and hidden emitters."""
     import imageio.v3 as iio
 
-    from pathtracer.film import write_image
     from tests.helpers import sphere_mesh, write_scene
     rng = np.random.default_rng(0)
     iio.imwrite(tmp_path / "a.png", rng.integers(0, 255, (8, 8, 3), dtype=np.uint8))

@@ -81,9 +81,9 @@ def test_damaged_files_are_one_line_errors(tmp_path):
 
 
 def test_a_mitsuba_scene_with_serialized_shapes_loads(tmp_path):
-    path = write_serialized(tmp_path / "m.serialized", meshes())
+    write_serialized(tmp_path / "m.serialized", meshes())
     xml = tmp_path / "s.xml"
-    xml.write_text(f"""<scene version="3.0.0">
+    xml.write_text("""<scene version="3.0.0">
   <sensor type="perspective"><float name="fov" value="40"/>
     <transform name="to_world"><lookat origin="0,0,6" target="0,0,0" up="0,1,0"/></transform>
     <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/>
