@@ -567,8 +567,8 @@ def _bounds(r, out):
                                                                              obj["file"])
             try:
                 v = load_mesh(path, shape_index=obj.get("shapeIndex", 0)).positions
-            except (SceneError, OSError):
-                continue        # the load itself reports it
+            except Exception:   # (any reader's failure): the scene's load reports it
+                continue
             v = v.reshape(-1, 3).astype(np.float64)
         else:
             v = np.asarray(obj["vertices"], np.float64)
