@@ -11,7 +11,8 @@ import pytest
 
 import pathtracer as pt
 from pathtracer.scene import SceneError
-from pathtracer.scene.serialized import load_serialized, read_serialized
+from pathtracer.scene.meshes import load_serialized
+from pathtracer.scene.serialized import read_serialized
 
 
 def write_serialized(path, meshes, version=4, double=False):
@@ -78,6 +79,14 @@ def test_damaged_files_are_one_line_errors(tmp_path):
             read_serialized(str(bad))
     with pytest.raises(SceneError, match="holds 3 meshes"):
         read_serialized(str(good), 3)
+    # the table's entry of mesh 1 pointing into the table itself (past any header)
+    table = len(data) - 4 - 3 * 8
+    moved = bytearray(data)
+    moved[table + 8:table + 16] = struct.pack("<Q", len(data) - 2)
+    bad = tmp_path / "moved.serialized"
+    bad.write_bytes(bytes(moved))
+    with pytest.raises(SceneError, match="no .serialized header"):
+        read_serialized(str(bad), 1)
 
 
 def test_a_mitsuba_scene_with_serialized_shapes_loads(tmp_path):

@@ -18,6 +18,7 @@ from typing import Optional
 import numpy as np
 
 from .errors import SceneError
+from .serialized import read_serialized
 
 CACHE_VERSION = 6
 
@@ -60,7 +61,7 @@ def _cache_key(path, data):
     return h.hexdigest()
 
 
-MESH_FORMATS = (".obj", ".ply", ".gltf", ".glb")
+MESH_FORMATS = (".obj", ".ply", ".gltf", ".glb", ".serialized")
 
 # PLY vertex properties read as texture coordinates, the first pair present wins
 PLY_UV_NAMES = (("s", "t"), ("u", "v"), ("texture_u", "texture_v"), ("texture_s", "texture_t"))
@@ -73,12 +74,24 @@ def load_mesh(path, use_cache=True, shape_index=0):
     if ext == ".ply":
         return load_ply(path)
     if ext == ".serialized":
-        from .serialized import load_serialized
         return load_serialized(path, shape_index)
     if ext in (".gltf", ".glb"):
         from .gltf import load_gltf_mesh
         return load_gltf_mesh(path)
     return load_obj(path, use_cache=use_cache)
+
+
+def load_serialized(path, shape_index=0):
+    """Mesh ``shape_index`` of a Mitsuba .serialized file (scene.serialized reads it) as
+    per-triangle arrays. Texture coordinates turn to the scene format's convention: v up
+    from the image's bottom row is Mitsuba's v flipped, v' = 1 - v, as for its OBJ files."""
+    p, faces, normals, uv, _, _ = read_serialized(path, shape_index)
+    if uv is not None:
+        uv = np.stack([uv[:, 0], 1.0 - uv[:, 1]], -1)
+    return ObjMesh(p[faces].astype(np.float32),
+                   normals[faces].astype(np.float32) if normals is not None else None,
+                   uv[faces].astype(np.float32) if uv is not None else None,
+                   np.full(len(faces), -1, np.int32), [])
 
 
 def load_ply(path):

@@ -66,7 +66,8 @@ def read_serialized(path, shape_index=0):
             raise SceneError(f"shape_index {shape_index}: the file holds {len(offsets)} "
                              f"meshes (0..{len(offsets) - 1})", path)
         offset = offsets[shape_index]
-        magic, version = struct.unpack_from("<HH", data, offset)
+        magic, version = struct.unpack_from("<HH", data, offset) if offset + 4 <= len(
+            data) else (0, 0)
         if magic != MAGIC or version not in (3, 4):
             raise SceneError(f"mesh {shape_index}: no .serialized header at its offset", path)
     try:
@@ -117,18 +118,4 @@ def _parse(raw, version, path):
     return p, faces, normals, uv, bool(flags & FACE_NORMALS), name
 
 
-def load_serialized(path, shape_index=0):
-    """Mesh ``shape_index`` of a .serialized file as per-triangle arrays (ObjMesh). Texture
-    coordinates turn to the scene format's convention (v up from the image's bottom row is
-    Mitsuba's v flipped: v' = 1 - v, as for its OBJ files)."""
-    from .meshes import ObjMesh
-    p, faces, normals, uv, _, _ = read_serialized(path, shape_index)
-    if uv is not None:
-        uv = np.stack([uv[:, 0], 1.0 - uv[:, 1]], -1)
-    return ObjMesh(p[faces].astype(np.float32),
-                   normals[faces].astype(np.float32) if normals is not None else None,
-                   uv[faces].astype(np.float32) if uv is not None else None,
-                   np.full(len(faces), -1, np.int32), [])
-
-
-__all__ = ["read_serialized", "load_serialized"]
+__all__ = ["read_serialized"]
