@@ -273,6 +273,9 @@ def load_scene(source, allow_missing=False, base=None, camera=None, environment=
     the scene's, as the CLI's flags; ``_check(description)``: a test run before compiling, such as the
     CLI's GPU memory check.)"""
     if isinstance(source, dict):
+        if params:
+            raise SceneError("params (-D NAME=VALUE) are for Mitsuba XML scenes, not a dict",
+                             DICT_NAME)
         data = _with_view(_plain(source), camera, environment, None)
         return Scene(data, DICT_NAME, base=os.path.abspath(base or os.getcwd()),
                      _overrides=_overrides, _check=_check)
@@ -440,8 +443,8 @@ def dark_image(image, features, exposure=0.0):
         return ("the image is black: the scene has no light (no emissive surface, light "
                 "or environment); add one, or --env FILE for an environment map")
     peak = float(image.max())
-    hidden = " (render.hideEmitters hides the emitters the camera sees)" if getattr(
-        f, "hide_emitters", False) else ""
+    hidden = (" (render.hideEmitters hides the emitters the camera sees)"
+              if f.hide_emitters else "")
     return (f"the image is black or nearly (99.9 % of its pixels below {DARK_LEVEL:.4f}, "
             f"brightest {peak:.3g}): little light reached the camera{hidden}; check where "
             "the camera looks and what lights the scene (--env FILE adds an environment "
@@ -631,7 +634,7 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
         raw, image = image, run_denoiser(image, aov_images, dn_device)
         denoise_seconds = _time.perf_counter() - t0
     if film.spp > 0:
-        why = dark_image(film.image(), scene.features, scene.display[0])
+        why = dark_image(image if raw is None else raw, scene.features, scene.display[0])
         if why:
             warnings.warn(why, DarkImageWarning, stacklevel=2)
     seconds = r.seconds

@@ -522,6 +522,8 @@ def test_parameters_from_the_command_line_and_path_folders(tmp_path):
         build_parser().parse_args([path, "-D", "nothing"])
     with pytest.raises(pt.SceneError, match="for Mitsuba XML scenes"):
         pt.load_scene(os.path.join(ROOT, "scenes", "cornell-box.json"), params={"a": 1})
+    with pytest.raises(pt.SceneError, match="for Mitsuba XML scenes"):
+        pt.load_scene({"camera": {}}, params={"a": 1})
 
 
 def test_normalmap_bsdf_gives_its_nested_material_a_normal_map(tmp_path):

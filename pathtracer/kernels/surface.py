@@ -14,13 +14,15 @@ from .constants import HORIZON_EPS, ONE, OFFSET_REL, TWO, ZERO
 from .device import device, step_marker
 from .layout import (P_ANISOTROPIC, P_BASE, P_CLEARCOAT, P_CLEARCOAT_GLOSS, P_ETA,
                      P_FLATNESS, P_METALLIC, P_ROUGHNESS, P_SHEEN, P_SHEEN_TINT,
-                     P_SPEC_TINT, P_TRANSMISSION, M_ALBEDO, M_ANISOTROPIC, M_CLEARCOAT, M_CLEARCOAT_GLOSS, M_EMISSION,
+                     P_SPEC_TINT, P_TRANSMISSION, M_ALBEDO, M_ANISOTROPIC, M_CLEARCOAT,
+                     M_CLEARCOAT_GLOSS, M_EMISSION,
                      M_ETA, M_METALLIC, M_ROUGHNESS, M_SHEEN, M_SHEEN_TINT, M_SPEC_TINT,
                      M_SPECULAR, M_SUBSURFACE, M_TRANSMISSION, M_TYPE, MAT_PRINCIPLED,
                      T_ALBEDO, T_ANISOTROPIC, T_CLEARCOAT, T_CLEARCOAT_GLOSS,
                      T_EMISSION, T_ETA, T_METALLIC, T_NORMAL, T_ROUGHNESS, T_SHEEN,
                      T_SHEEN_TINT, T_SPEC_TINT, T_SPECULAR, T_SUBSURFACE, T_TRANSMISSION,
-                     TRI_COL0, TRI_COL1, TRI_COL2, TRI_N0, TRI_N1, TRI_N2, TRI_T0, TRI_T1, TRI_T2, TRI_T_SIGN, TRI_UV0,
+                     TRI_COL0, TRI_COL1, TRI_COL2, TRI_N0, TRI_N1, TRI_N2, TRI_T0, TRI_T1,
+                     TRI_T2, TRI_T_SIGN, TRI_UV0,
                      TRI_UV1, TRI_UV2, specialise)
 from .normalmap import clamp_mapped_normal, mapped_normal_seeing
 from .textures import make_tex_lookup

@@ -42,8 +42,8 @@ from ..kernels.layout import (CAM_CONE, CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_
                               WRAP_REPEAT, TEX_FIRST, TEX_HEIGHT, TEX_INT_WIDTH, TEX_LEVELS,
                               TEXEL_WIDTH,
                               TEX_OFFSET, TEX_SCALE, TEX_TILE, TEX_WIDTH, TRI_E1, TRI_E2,
-                              TRI_COL_WIDTH, TRI_N_WIDTH, TRI_T0, TRI_T_SIGN, TRI_T_WIDTH, TRI_UV_WIDTH,
-                              TRI_V0,
+                              TRI_COL_WIDTH, TRI_N_WIDTH, TRI_T0, TRI_T_SIGN, TRI_T_WIDTH,
+                              TRI_UV_WIDTH, TRI_V0,
                               TRI_V_WIDTH, Features, SceneArrays, point_light_ref)
 from ..kernels import layout as L
 from ..accel.light_tree import LightBounds, build_light_tree

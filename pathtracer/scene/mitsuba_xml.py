@@ -18,7 +18,9 @@ import numpy as np
 
 from .errors import SceneError
 from .spectra import spectrum_to_rgb, uniform_to_rgb
+from .geometry import uv_sphere
 from .gltf import cached_file
+from .meshes import load_mesh
 
 # principled parameters: Mitsuba name -> scene-format key (kernels.layout's parameter table)
 from ..kernels.layout import MATERIAL_PARAMS
@@ -559,7 +561,6 @@ def _default_sensor(r, out):
 
 def _bounds(r, out):
     """The bounding box (lo, hi) of the converted objects, their files read."""
-    from .meshes import load_mesh
     points = []
     for obj in out["objects"]:
         if "file" in obj:
@@ -811,11 +812,12 @@ def _plastic(r, el, p, name, kind):
     diffuse and Schlick's Fresnel then differ from Mitsuba's (1 - F) transmission terms
     away from normal incidence."""
     eta = _ior(r, p, "int_ior", 1.49) / _ior(r, p, "ext_ior", 1.000277)
-    texture = None
-    if "diffuse_reflectance" in p and p["diffuse_reflectance"][0] in ("texture", "ref"):
-        texture = _rgb_or_texture(r, el, p["diffuse_reflectance"])
-    rho = [0.5] * 3 if texture is not None and isinstance(texture, dict) else \
-        r.get(p, "diffuse_reflectance", "color", [0.5] * 3) if texture is None else texture
+    # a colour, or a texture (whose scale takes the factor below; with nonlinear, the
+    # factor of a mid-grey texel)
+    base = _rgb_or_texture(r, el, p["diffuse_reflectance"]) if "diffuse_reflectance" in p \
+        else [0.5] * 3
+    texture = base if isinstance(base, dict) else None
+    rho = [0.5] * 3 if texture is not None else base
     spec = r.get(p, "specular_reflectance", "color", [1.0] * 3)
     nonlinear = r.get(p, "nonlinear", "bool", False)
     f0 = ((eta - 1) / (eta + 1)) ** 2
@@ -823,8 +825,7 @@ def _plastic(r, el, p, name, kind):
     rho = np.asarray(rho, float)
     scale = (1 - f0) ** 2 / eta ** 2 / ((1 - rho * f_dr) if nonlinear else (1 - f_dr))
     albedo = [float(x) for x in np.clip(rho * scale, 0, 1)]
-    if isinstance(texture, dict):
-        # a texture's texels scaled alike (nonlinear: by the factor of a mid-grey texel)
+    if texture is not None:
         texture["scale"] = [float(x) for x in np.broadcast_to(scale, 3)]
         albedo = texture
     mat = {"name": name, "type": "principled", "metallic": 0.0, "albedo": albedo,
@@ -833,8 +834,9 @@ def _plastic(r, el, p, name, kind):
     _only(r, el, p, ("int_ior", "ext_ior", "diffuse_reflectance", "specular_reflectance",
                      "nonlinear", "alpha", "distribution", "sample_visible"))
     r.warn(f"{kind} approximated by the principled BSDF (its specular lobe at the coat's "
-           f"F0 = {f0:.4f}, its diffuse lobe with the base's reflectance x {float(np.mean(scale)):.3f}, "
-           "Mitsuba's internal scattering at normal incidence)", el)
+           f"F0 = {f0:.4f}, its diffuse lobe with the base's reflectance x "
+           f"{float(np.mean(scale)):.3f}, Mitsuba's internal scattering at normal incidence)",
+           el)
     return mat
 
 
@@ -909,13 +911,7 @@ def _ior(r, p, key, default):
 def _roughness(r, el, p):
     """Mitsuba's microfacet alpha -> the principled roughness (alpha = roughness^2); its
     default distribution, Beckmann, is rendered as GGX of the same alpha (a warning)."""
-    # (Mitsuba's default distribution is Beckmann)
-    dist = r.get(p, "distribution", "str", "beckmann")
-    if dist not in ("ggx", "beckmann"):
-        raise r.error(f"microfacet distribution {dist!r}: expected ggx or beckmann", el)
-    if dist == "beckmann":
-        r.warn("the Beckmann distribution is rendered as GGX with the same alpha (the "
-               "principled BSDF's; GGX has the longer tails)", el)
+    _distribution(r, el, p)
     if "alpha_u" in p or "alpha_v" in p:
         raise r.error("anisotropic alpha_u/alpha_v: supported on roughconductor only", el)
     alpha = _number(r, p["alpha"], "alpha") if "alpha" in p else 0.1
@@ -924,9 +920,20 @@ def _roughness(r, el, p):
     return math.sqrt(alpha)
 
 
+def _distribution(r, el, p):
+    """Mitsuba's microfacet distribution (its default: Beckmann), rendered as GGX of the
+    same alpha (the principled BSDF's); Beckmann with a warning."""
+    dist = r.get(p, "distribution", "str", "beckmann")
+    if dist not in ("ggx", "beckmann"):
+        raise r.error(f"microfacet distribution {dist!r}: expected ggx or beckmann", el)
+    if dist == "beckmann":
+        r.warn("the Beckmann distribution is rendered as GGX with the same alpha (the "
+               "principled BSDF's; GGX has the longer tails)", el)
+
+
 def _anisotropic_roughness(r, el, p):
     """(roughness, anisotropic) of the principled BSDF for Mitsuba's alpha_u, alpha_v."""
-    _roughness(r, el, {k: v for k, v in p.items() if k not in ("alpha_u", "alpha_v")})
+    _distribution(r, el, p)
     au = _number(r, p["alpha_u"], "alpha_u") if "alpha_u" in p else 0.1
     av = _number(r, p["alpha_v"], "alpha_v") if "alpha_v" in p else 0.1
     if not (0 < au <= 1 and 0 < av <= 1):
@@ -995,7 +1002,6 @@ def _shape(r, el, out, materials):
     elif kind == "cube":
         obj["vertices"], obj["faces"] = _cube()
     elif kind == "sphere":
-        from .geometry import uv_sphere
         radius = r.get(p, "radius", "float", 1.0)
         center = r.get(p, "center", "point", [0.0, 0.0, 0.0])
         # Mitsuba's sphere: its pole on local +Z, u = phi / 2 pi from +X towards +Y, v =
