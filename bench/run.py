@@ -30,7 +30,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 from bench.common import command, machine, median_time, now, usable_mitsuba, versions
 from bench.metrics import rays_per_second, relmse, time_to_threshold
 from bench.scenes import (CONVERGENCE, convergence_desc, convergence_scene, load_reference,
-                          mesh_desc)
+                          mesh_desc, mitsuba_scene)
 
 FIELDS = ["section", "scene", "renderer", "parameter", "value", "metric", "result", "unit",
           "command", "machine", "date", "versions"]
@@ -118,7 +118,7 @@ def convergence_mitsuba(variant, name, max_spp):
     import mitsuba as mi
 
     mi.set_variant(variant)
-    got = _mitsuba_scene(name, "independent")
+    got = mitsuba_scene(name, "independent")
     if got is None:
         return None
     scene, ref = got
@@ -226,24 +226,6 @@ def curves_from_csv(paths):
 # ---------------------------------------------------------------------------------------
 # Throughput, texture filtering, block sizes, compile times
 
-def _mitsuba_scene(name, sampler):
-    """Mitsuba's scene of a convergence scene with its sampler of type ``sampler``, and its
-    reference; None when Mitsuba cannot render it."""
-    import mitsuba as mi
-
-    from bench.common import mitsuba_cornell
-    from pathtracer.mitsuba import NotExpressible, mitsuba_dict
-    try:
-        ref, _ = load_reference(name, mitsuba=True)
-        scene = (mitsuba_cornell(ref.shape[1], ref.shape[0], 1, sampler=sampler)
-                 if name == "cornell-box" else
-                 mi.load_dict(mitsuba_dict(convergence_desc(name), sampler=sampler)))
-    except (FileNotFoundError, NotExpressible) as e:
-        print(f"bench: no Mitsuba renders of {name}: {e}", file=sys.stderr)
-        return None
-    return scene, ref
-
-
 def mean_and_error(errs):
     """(mean, standard error of the mean) of per-seed relMSEs (0 error for one seed)."""
     errs = np.asarray(errs, np.float64)
@@ -281,7 +263,7 @@ def section_samplers(scenes, backend_name, mitsuba_variant, spps, seeds, r):
             import mitsuba as mi
             mi.set_variant(mitsuba_variant)
             for sampler in MITSUBA_SAMPLERS:
-                got = _mitsuba_scene(name, sampler)
+                got = mitsuba_scene(name, sampler)
                 if got is None:
                     break
                 scene, mref = got

@@ -3,11 +3,12 @@ the BVH and scaling studies. Scenes that need data from ../shared are built here
 dictionaries (the scene format), so that ``PT_RENDER_SHARED`` can point at a copy."""
 import json
 import os
+import sys
 import tempfile
 
 import numpy as np
 
-from bench.common import CORNELL, CORNELL_REF, ROOT, SHARED
+from bench.common import CORNELL, CORNELL_REF, ROOT, SHARED, mitsuba_cornell
 
 SCENES_DIR = os.path.join(ROOT, "scenes")
 MODELS = os.path.join(SHARED, "assets", "models")
@@ -213,3 +214,20 @@ def grazing_plane(folder, filt, res=(64, 32), spp=4):
     with open(path, "w") as f:
         json.dump(scene, f)
     return path
+
+
+def mitsuba_scene(name, sampler):
+    """Mitsuba's scene of a convergence scene with its sampler of type ``sampler``, and its
+    reference; None when Mitsuba cannot render it."""
+    import mitsuba as mi
+
+    from pathtracer.mitsuba import NotExpressible, mitsuba_dict
+    try:
+        ref, _ = load_reference(name, mitsuba=True)
+        scene = (mitsuba_cornell(ref.shape[1], ref.shape[0], 1, sampler=sampler)
+                 if name == "cornell-box" else
+                 mi.load_dict(mitsuba_dict(convergence_desc(name), sampler=sampler)))
+    except (FileNotFoundError, NotExpressible) as e:
+        print(f"bench: no Mitsuba renders of {name}: {e}", file=sys.stderr)
+        return None
+    return scene, ref

@@ -112,7 +112,7 @@ def convergence_scenes(names, spp, repeats, rounds, samplers=("sobol",)):
     (the first is the record's main figure): the Sobol sampler's hashing cost the CPU
     9-20 % of its paths/s on 2026-11-28 (docs/benchmarks.md), and Mitsuba's figures are of
     its independent sampler."""
-    from bench.run import _mitsuba_scene
+    from bench.scenes import mitsuba_scene
     from bench.scenes import convergence_desc
     out = []
     ok, why = usable_mitsuba("llvm_ad_rgb")
@@ -123,7 +123,7 @@ def convergence_scenes(names, spp, repeats, rounds, samplers=("sobol",)):
         if ok:
             import mitsuba as mi
             mi.set_variant("llvm_ad_rgb")
-            got = _mitsuba_scene(name, "independent")
+            got = mitsuba_scene(name, "independent")
         prepared = {}                       # (the BVH and the kernel once, not each round)
         for sampler in samplers:
             desc = convergence_desc(name)

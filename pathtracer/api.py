@@ -24,13 +24,6 @@ from .scene.compile import CompileMemo, compile_scene
 from .scene.loader import SAMPLERS, TONEMAPS, describe, read_scene_data
 
 DICT_NAME = "<scene dict>"     # how error messages name a scene given as a dict
-# Paths in the first pass of a render without a callback, per backend: large enough that a
-# small GPU re-render is one launch and that the passes of a large one do not start at a
-# few ms of work (each pass costs a launch, a copy and the film's sum: ~8 ms for a 1024^2
-# image on an H200, measured 2026-11-24), small enough that Ctrl-C is answered within a
-# fraction of a second (2^23 paths: ~10-30 ms on an H100). A split render's workers take
-# this each (distribute.SplitBackend.first_pass_paths).
-FIRST_PASS_PATHS = {"cuda": 1 << 23, "cpu": 1 << 17}
 # Paths in the first pass of a render whose passes are seen (a callback: the command's
 # progress line and saves, the live preview), per backend (others: 1 spp). On the GPU a pass
 # too small to fill it costs almost what one of this size costs (Cornell box 256^2 on an
@@ -600,7 +593,7 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
     if film is not None and spp is not None and film.spp >= spp:
         spp = film.spp          # a resumed render already there: nothing more to render
     if pass_seconds is None:
-        pass_seconds = getattr(be, "pass_seconds", 0.25 if be.name == "cuda" else 0.5)
+        pass_seconds = be.pass_seconds
     headless = callback is None and time is None and spp is not None
     if adaptive:
         # the first pass that fills one device, seen or not: an adaptive render's pass
@@ -608,9 +601,10 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
         # one device's (the first ADAPTIVE_MIN_SPP samples are judged together anyway)
         most = PREVIEW_FIRST_PASS_PATHS.get(be.name, 0)
     elif headless:
-        # Nobody sees the intermediate images: start with a pass of up to FIRST_PASS_PATHS
-        # paths (a power of 2 spp), so a small re-render is one or two launches, not log2(spp).
-        most = getattr(be, "first_pass_paths", FIRST_PASS_PATHS.get(be.name, 0))
+        # Nobody sees the intermediate images: start with a pass of up to the backend's
+        # first_pass_paths (backends.base.FIRST_PASS_PATHS; a power of 2 spp), so a small
+        # re-render is one or two launches, not log2(spp).
+        most = be.first_pass_paths
     else:
         most = PREVIEW_FIRST_PASS_PATHS.get(be.name, 0)
     first_pass = first_pass_spp(spp, pixels, most)
@@ -647,7 +641,7 @@ def render(scene, spp=None, time=None, seed=None, backend="auto", sampler=None,
              "rays_per_second": sum(new_rays) / seconds if seconds > 0 else float("nan")}
     return Result(image, film.spp, seconds, compile_seconds, stopped, stats, scene.display,
                   raw, aov_images if aovs else None, film, r.passes, be.name, r.signal,
-                  denoise_seconds, be.shares() if hasattr(be, "shares") else None, dn_device)
+                  denoise_seconds, be.shares(), dn_device)
 
 
 __all__ = ["Scene", "load_scene", "render", "Result", "Progress", "output_files",

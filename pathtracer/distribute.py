@@ -36,6 +36,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .backends.base import FIRST_PASS_PATHS, Backend
+
 # Items per worker and pass: enough that the last item of a pass (when the other workers
 # may wait) is a small part of it, few enough that each item still fills a GPU...
 ITEMS_PER_WORKER = 4
@@ -366,7 +368,7 @@ def _same(a, b):
 _scene_keys = itertools.count(1)
 
 
-class SplitBackend:
+class SplitBackend(Backend):
     """A backend that renders each pass on all workers of ``pool`` (see the module's
     docstring). ``name``: the workers' backend kind; ``pass_seconds``: what the
     progressive loop aims a pass at."""
@@ -435,7 +437,6 @@ class SplitBackend:
     def first_pass_paths(self):
         """Paths a first pass may take when nobody sees the intermediate images (see
         api.render): every worker's share, as for one device of its kind."""
-        from .api import FIRST_PASS_PATHS
         return FIRST_PASS_PATHS.get(self.name, 0) * len(self.pool)
 
     def render_pass(self, sample_start, n_samples, seed, max_bounces, rr_depth, active=None):

@@ -106,6 +106,55 @@ def _accumulate(total, count, pass_sum, n_samples, active, masked, total_b, coun
                     total_b[y, x, c] += v
 
 
+RELMSE_EPS = 0.01       # the relMSE metric's denominator term (relmse)
+
+
+def error_estimate(film):
+    """Per pixel, the estimated relMSE of its mean: the two halves of every adaptive pass
+    are two independent estimates a and b of the pixel (each from half the samples), so
+    (a - b)^2 / 4 estimates the variance of their mean; divided by mean^2 + 0.01 as in the
+    relMSE metric, averaged over the channels, and then over each pixel's 3 x 3
+    neighbourhood (one pixel's estimate, from one difference, is too noisy to stop on:
+    Cycles' adaptive sampling filters it likewise; the image's edge pixels repeated)."""
+    return _error_estimate(film.sum, film.sum_b, film.count, film.count_b)
+
+
+@njit(cache=jit_cache())
+def _error_estimate(total, total_b, count, count_b):
+    """error_estimate's loops. This runs on the host after every adaptive pass, where a
+    GPU pass of a small image takes a few ms; its NumPy form (whole-array operations and
+    their temporaries) took 2.4 ms a pass for a 256 x 192 image on the H100 machine's CPU,
+    a fifth of the sun's adaptive render there (2026-11-25, docs/benchmarks.md)."""
+    h, w = count.shape
+    q = np.empty((h, w))
+    for y in range(h):
+        for x in range(w):
+            n = count[y, x]
+            nb = count_b[y, x]
+            inv_b = 1.0 / max(nb, 1)
+            inv_a = 1.0 / max(n - nb, 1)
+            inv_n = 1.0 / max(n, 1)
+            acc = 0.0
+            for c in range(3):
+                b = total_b[y, x, c]
+                d = (total[y, x, c] - b) * inv_a - b * inv_b       # a - b
+                m = total[y, x, c] * inv_n
+                acc += d * d / (m * m + RELMSE_EPS)
+            q[y, x] = acc * (1.0 / 12.0)     # / 4 (the variance of the mean of a and b), / 3
+    # the 3 x 3 mean as two passes of three (rows, then columns)
+    rows = np.empty((h, w))
+    for y in range(h):
+        for x in range(w):
+            rows[y, x] = q[y, max(x - 1, 0)] + q[y, x] + q[y, min(x + 1, w - 1)]
+    out = np.empty((h, w))
+    for y in range(h):
+        up = max(y - 1, 0)
+        down = min(y + 1, h - 1)
+        for x in range(w):
+            out[y, x] = (rows[up, x] + rows[y, x] + rows[down, x]) * (1.0 / 9.0)
+    return out
+
+
 def compile_accumulation(adaptive=False):
     """Compile (or load from the disk cache) Film.add's loop, and with ``adaptive``
     the error estimate's, so that a render's clock does not count it."""
@@ -114,7 +163,6 @@ def compile_accumulation(adaptive=False):
     film.add(np.zeros((1, 1, 3), np.float32), stats, 1)
     if adaptive:
         film.add(np.zeros((1, 1, 3), np.float32), stats, 1, _NO_MASK, half_b=True)
-        from .progressive import error_estimate
         error_estimate(film)
 
 

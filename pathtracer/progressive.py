@@ -5,12 +5,11 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
 from . import limits
 from ._cache import jit_cache
 from .errors import Interrupted
-from .film import Film, compile_accumulation
+from .film import RELMSE_EPS, Film, compile_accumulation, error_estimate  # noqa: F401
 from .scene.compile import for_spp
 
 
@@ -29,7 +28,6 @@ class RenderResult:
 HEADLESS_GROWTH = 64
 # Adaptive sampling: every pixel takes this many samples before its error is judged
 ADAPTIVE_MIN_SPP = 16
-RELMSE_EPS = 0.01       # the relMSE metric's denominator term (film.relmse)
 # A uniform render's next pass is launched before the last one is added to the film (see
 # render) after passes shorter than this: on_pass may stop the render with it in flight
 PIPELINE_SECONDS = 0.05
@@ -52,52 +50,6 @@ def stop_threshold(film, target, err):
         return target
     sigma *= target / mean
     return sigma
-
-
-def error_estimate(film):
-    """Per pixel, the estimated relMSE of its mean: the two halves of every adaptive pass
-    are two independent estimates a and b of the pixel (each from half the samples), so
-    (a - b)^2 / 4 estimates the variance of their mean; divided by mean^2 + 0.01 as in the
-    relMSE metric, averaged over the channels, and then over each pixel's 3 x 3
-    neighbourhood (one pixel's estimate, from one difference, is too noisy to stop on:
-    Cycles' adaptive sampling filters it likewise; the image's edge pixels repeated)."""
-    return _error_estimate(film.sum, film.sum_b, film.count, film.count_b)
-
-
-@njit(cache=jit_cache())
-def _error_estimate(total, total_b, count, count_b):
-    """error_estimate's loops. This runs on the host after every adaptive pass, where a
-    GPU pass of a small image takes a few ms; its NumPy form (whole-array operations and
-    their temporaries) took 2.4 ms a pass for a 256 x 192 image on the H100 machine's CPU,
-    a fifth of the sun's adaptive render there (2026-11-25, docs/benchmarks.md)."""
-    h, w = count.shape
-    q = np.empty((h, w))
-    for y in range(h):
-        for x in range(w):
-            n = count[y, x]
-            nb = count_b[y, x]
-            inv_b = 1.0 / max(nb, 1)
-            inv_a = 1.0 / max(n - nb, 1)
-            inv_n = 1.0 / max(n, 1)
-            acc = 0.0
-            for c in range(3):
-                b = total_b[y, x, c]
-                d = (total[y, x, c] - b) * inv_a - b * inv_b       # a - b
-                m = total[y, x, c] * inv_n
-                acc += d * d / (m * m + RELMSE_EPS)
-            q[y, x] = acc * (1.0 / 12.0)     # / 4 (the variance of the mean of a and b), / 3
-    # the 3 x 3 mean as two passes of three (rows, then columns)
-    rows = np.empty((h, w))
-    for y in range(h):
-        for x in range(w):
-            rows[y, x] = q[y, max(x - 1, 0)] + q[y, x] + q[y, min(x + 1, w - 1)]
-    out = np.empty((h, w))
-    for y in range(h):
-        up = max(y - 1, 0)
-        down = min(y + 1, h - 1)
-        for x in range(w):
-            out[y, x] = (rows[up, x] + rows[y, x] + rows[down, x]) * (1.0 / 9.0)
-    return out
 
 
 def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=None,
@@ -160,9 +112,8 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
     compile_seconds = time.perf_counter() - t0
     # the film only adds the ray counts up: a backend that can sum them itself (CUDA: on
     # the GPU) returns the totals rather than H x W x 3 counts per pass
-    render_pass = getattr(backend, "render_pass_totals", backend.render_pass)
-    render_halves = getattr(backend, "render_halves", None) if adaptive else None
-    if render_halves is not None:
+    render_pass = backend.render_pass_totals
+    if adaptive:
         backend.prepare_halves()
     result = RenderResult(film, 0.0, compile_seconds)
     # an adaptive pass has two halves; its first passes (before ADAPTIVE_MIN_SPP samples,
@@ -181,9 +132,7 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
     # one to the film and calls on_pass, so the GPU renders while the host does that (a
     # small image's progressive render: ~0.5 ms a pass). Only after short passes
     # (PIPELINE_SECONDS): a pass launched ahead is lost when on_pass stops the render.
-    launch_pass = getattr(backend, "launch", None)
-    collect = getattr(backend, "collect_pass_totals", None)
-    pipelined = not adaptive and launch_pass is not None and collect is not None
+    pipelined = not adaptive and backend.pipelined
 
     def finished(done, elapsed):
         return (spp is not None and done >= spp) or done >= limits.MAX_SPP or \
@@ -235,10 +184,8 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
                 first = film.spp
                 # both halves from one launch where the backend can (CUDA), else one
                 # launch each (lazily: a pass's buffers are added before the next one)
-                halves = render_halves(first, half, seed, max_bounces, rr_depth, active) \
-                    if render_halves is not None else (
-                        render_pass(first + k * half, half, seed, max_bounces, rr_depth,
-                                    active) for k in range(2))
+                halves = backend.render_halves(first, half, seed, max_bounces, rr_depth,
+                                               active)
                 for k, (pass_sum, stats) in enumerate(halves):
                     film.add(pass_sum, stats, half, active, half_b=k == 1)
                 dt = time.perf_counter() - t_pass
@@ -248,9 +195,9 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
                 dt = time.perf_counter() - t_pass
             elif pipelined:
                 if not launched:
-                    launch_pass(film.spp, n, seed, max_bounces, rr_depth)
+                    backend.launch(film.spp, n, seed, max_bounces, rr_depth)
                 t_wait = time.perf_counter()
-                pass_sum, stats = collect()
+                pass_sum, stats = backend.collect_pass_totals()
                 now = time.perf_counter()
                 # a pass launched ahead ran on the GPU through the last pass's on_pass (which
                 # may save files): that time is not the pass's own, as it was not before
@@ -261,7 +208,7 @@ def render(scene, backend, spp=None, time_limit=None, seed=None, max_bounces=Non
                 elapsed = time.perf_counter() - start
                 if dt < PIPELINE_SECONDS and not finished(done, elapsed):
                     n_next = clamp(next_size(n, dt, elapsed), done)
-                    launch_pass(done, n_next, seed, max_bounces, rr_depth)
+                    backend.launch(done, n_next, seed, max_bounces, rr_depth)
                     ahead = (time.perf_counter(), n_next)
                 film.add(pass_sum, stats, n)
             else:

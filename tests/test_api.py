@@ -261,9 +261,9 @@ def test_recompile_keeps_textures_and_bvh_arrays():
 
 def test_wavefront_threshold_follows_the_scene_features():
     """Scenes with mip-mapped textures hand passes to the wavefront kernels from a lower
-    size (backends.cuda.wave_min_paths_for); importing the CUDA backend needs no GPU."""
-    from pathtracer.backends.cuda import (WAVE_MIN_PATHS, WAVE_MIN_PATHS_MIPMAPS,
-                                          wave_min_paths_for)
+    size (kernels.drivers.wave_min_paths_for); the table needs no GPU."""
+    from pathtracer.kernels.drivers import (WAVE_MIN_PATHS, WAVE_MIN_PATHS_MIPMAPS,
+                                            wave_min_paths_for)
     plain = pt.load_scene(room()).compiled.features
     assert wave_min_paths_for(plain) == WAVE_MIN_PATHS
     textured = pt.load_scene(os.path.join(ROOT, "scenes", "textured.json")).compiled.features

@@ -213,8 +213,8 @@ def test_cpu_profile_names_and_symbol_table():
     from bench.cpu_profile import short_name
     assert short_name("_ZN10pathtracer7kernels8traverse11closest_hitB3v78B52c8tJT") == \
         "traverse.closest_hit"
-    assert short_name("_ZN10pathtracer7kernels10integrator12make_kernels12_3clocals_3e13"
-                      "render_sampleB3v62") == "integrator.render_sample"
+    assert short_name("_ZN10pathtracer7kernels7drivers10megakernel15make_megakernel"
+                      "12_3clocals_3e13render_sampleB3v62") == "megakernel.render_sample"
     if shutil.which("nm") is None:
         pytest.skip("needs nm (binutils)")
     with tempfile.TemporaryDirectory() as tmp:
@@ -232,8 +232,8 @@ def test_cpu_profile_names_and_symbol_table():
         code_bytes = json.load(open(code))
         rate = json.loads(r.stdout.strip().splitlines()[-1])
     names = {short_name(row[2]) for row in rows}
-    assert {"integrator.render_sample", "wide.closest_hit_wide",
-            "integrator.direct_light"} <= names, sorted(names)
+    assert {"megakernel.render_sample", "wide.closest_hit_wide",
+            "path.direct_light"} <= names, sorted(names)
     # the machine code of every function, as long as its symbol says
     assert all(len(code_bytes[str(a)]) == 2 * n for a, n, _ in rows)
     assert rate["render_start"] <= rate["render_end"]

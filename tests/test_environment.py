@@ -441,7 +441,7 @@ def test_compensation_keeps_the_image(tmp_path, backend):
 
 def test_cpu_ring_skips_finished_pixels(tmp_path):
     """The CPU's pass for scenes with an environment map finishes each path a few paths
-    later from a ring per image row (integrator.render_pixel_deferred); pixels that
+    later from a ring per image row (drivers.deferred); pixels that
     adaptive sampling has finished are skipped in between. The other pixels' sums and
     counts are those of the pass over every pixel, bit for bit, and the finished pixels
     are zero (each row holds 8 pixels x 5 paths, more than the ring's records)."""

@@ -1,8 +1,8 @@
 """The data contract between host and device (kernels/layout.py) and the code's shape.
 
 - No module but the layout indexes a kernel array's columns with an integer literal.
-- ``render_pixel`` and ``render_sample`` stay short loops over named steps, and the step
-  of one path vertex readable (<= 120 lines each, nesting <= 5).
+- The bounce is written once (kernels/path.py) and the drivers are short loops around it:
+  kernel functions <= 100 lines, factories <= 200, nesting <= 5.
 - The one material-parameter table agrees with the loader, the compiler's arrays and
   docs/scene-format.md (names, defaults, ranges).
 """
@@ -96,11 +96,16 @@ def test_no_column_index_literal_outside_the_layout_module():
     assert not offenders, "column numbers outside kernels/layout.py:\n" + "\n".join(offenders)
 
 
-def _integrator_function(name):
-    path = os.path.join(ROOT, "pathtracer", "kernels", "integrator.py")
-    tree = ast.parse(open(path, encoding="utf-8").read())
-    return next(n for n in ast.walk(tree)
-                if isinstance(n, ast.FunctionDef) and n.name == name)
+KERNELS = os.path.join(ROOT, "pathtracer", "kernels")
+
+
+def _kernel_functions():
+    """(file, FunctionDef) of every function in pathtracer/kernels (nested ones too)."""
+    for f in sorted(glob.glob(os.path.join(KERNELS, "**", "*.py"), recursive=True)):
+        tree = ast.parse(open(f, encoding="utf-8").read())
+        for n in ast.walk(tree):
+            if isinstance(n, ast.FunctionDef):
+                yield os.path.relpath(f, KERNELS), n
 
 
 def _nesting(node, depth=0):
@@ -112,11 +117,80 @@ def _nesting(node, depth=0):
     return deepest
 
 
-@pytest.mark.parametrize("name", ["render_pixel", "render_sample", "path_vertex"])
-def test_path_is_short_and_shallow(name):
-    fn = _integrator_function(name)
-    assert fn.end_lineno - fn.lineno + 1 <= 120
-    assert _nesting(fn) <= 5
+def _lines(fn):
+    return fn.end_lineno - fn.lineno + 1
+
+
+def _calls(fn):
+    """Names of the functions that ``fn``'s own body calls (not its nested functions')."""
+    names = []
+    stack = list(ast.iter_child_nodes(fn))
+    while stack:
+        node = stack.pop()
+        if isinstance(node, ast.FunctionDef):
+            continue
+        if isinstance(node, ast.Call):
+            names.append(_name(node.func))
+        stack.extend(ast.iter_child_nodes(node))
+    return names
+
+
+# Over the limits and not split yet (README, "Missing"): the principled BSDF's evaluation (one
+# device function that the GPU keeps as a call: backends.cuda.NOINLINE), its factory, the
+# surface factory and the binary BVH's any-hit loop (nesting 6). The list may only shrink.
+STILL_LONG = {"principled.py:principled_eval", "principled.py:make_principled",
+              "surface.py:make_surface", "traverse.py:any_hit"}
+# The entries the backends' kernels call with their arrays (their signatures are the
+# backends' protocol: a pass's arguments as the GPU launches take them).
+ENTRY_POINTS = {"render_pixel", "render_pixel_nested", "render_pixel_deferred",
+                "render_sample", "next_camera_lane", "camera_packet", "wave_start",
+                "wave_shade", "wave_finish", "wave_film", "wave_trace", "store_hit",
+                "aov_pixel", "drain_escapes", "finish_record", "queue_record"}
+
+
+def test_kernel_functions_are_short_and_shallow():
+    """Every kernel function <= 100 lines and nesting <= 5; a factory (``make_*``, whose
+    nested functions are the kernels) <= 200 lines; the bounce's steps and the drivers'
+    loops take <= 8 arguments."""
+    long, deep, wide = [], [], []
+    for f, fn in _kernel_functions():
+        limit = 200 if fn.name.startswith("make_") else 100
+        if _lines(fn) > limit and f"{f}:{fn.name}" not in STILL_LONG:
+            long.append(f"{f}:{fn.name} {_lines(fn)}")
+        if _nesting(fn) > 5 and f"{f}:{fn.name}" not in STILL_LONG:
+            deep.append(f"{f}:{fn.name}")
+        if (f == "path.py" or f.startswith("drivers")) and len(fn.args.args) > 8 \
+                and fn.name not in ENTRY_POINTS:
+            wide.append(f"{f}:{fn.name} {len(fn.args.args)}")
+    assert not long and not deep and not wide, (long, deep, wide)
+
+
+def test_the_bounce_is_written_once():
+    """The bounce is written once (kernels/path.py) and every driver calls it: each of its
+    steps is called from one place in the kernels (the material, the shading frame, the
+    emitters' sampling and hit, BSDF sampling, Russian roulette), and every driver's module
+    calls the bounce (shade_surface or path_vertex) or its first-hit steps (the AOVs)."""
+    once = {"material_at": 0, "shading_frame": 0, "sample_emitter": 0, "hit_emission": 0,
+            "sample_world": 0, "russian_roulette": 0}
+    where = {name: [] for name in once}
+    drivers = {}
+    for f, fn in _kernel_functions():
+        calls = _calls(fn)
+        for name in once:
+            n = calls.count(name)
+            if n:
+                where[name].append(f"{f}:{fn.name}")
+                once[name] += n
+        if f.startswith("drivers"):
+            drivers.setdefault(f, set()).update(calls)
+    assert all(n == 1 for n in once.values()), where
+    assert all(w[0].startswith("path.py:") for w in where.values()), where
+    assert {"drivers/megakernel.py", "drivers/deferred.py", "drivers/wavefront.py",
+            "drivers/aov.py"} <= set(drivers)
+    for f, calls in drivers.items():
+        if f.endswith("__init__.py"):
+            continue
+        assert calls & {"shade_surface", "path_vertex", "render_sample", "surface_shading"}, f
 
 
 def test_layout_is_consistent():
@@ -210,3 +284,71 @@ def test_docs_loader_and_layout_agree_on_material_parameters(tmp_path):
             bad = dict(base, materials=[{"name": "m", p.key: p.hi + 0.5}])
             with pytest.raises(SceneError, match=f"/materials/0/{p.key}"):
                 _describe(tmp_path, bad)
+
+
+def _import_graph(package):
+    """{module: modules of ``package`` it imports} for every module of ``package`` (under
+    ROOT), imports inside functions included (a cycle hidden behind a function-level import
+    is still a cycle)."""
+    files = {}
+    for f in glob.glob(os.path.join(ROOT, package, "**", "*.py"), recursive=True):
+        name = os.path.relpath(f, ROOT)[:-3].replace(os.sep, ".")
+        files[name[:-len(".__init__")] if name.endswith(".__init__") else name] = f
+    graph = {}
+    for name, f in files.items():
+        graph[name] = set()
+        base = name.split(".") if f.endswith("__init__.py") else name.split(".")[:-1]
+        for node in ast.walk(ast.parse(open(f, encoding="utf-8").read())):
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                module = ".".join((base[:len(base) - node.level + 1] if node.level else []) +
+                                  ([node.module] if node.module else []))
+                targets = [module + "." + a.name if module + "." + a.name in files else module
+                           for a in node.names]
+            else:
+                continue
+            graph[name].update(t for t in targets if t in files and t != name)
+    return graph
+
+
+def _cycles(graph):
+    """The strongly connected components of more than one module (Tarjan)."""
+    index, low, stack, on_stack, found = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+@pytest.mark.parametrize("package", ["pathtracer", "bench"])
+def test_no_import_cycles(package):
+    graph = _import_graph(package)
+    assert len(graph) > 10 and any(graph.values())
+    assert _cycles(graph) == []
+
+
+def test_the_cycle_finder_finds_a_cycle():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert _cycles({"a": {"b"}, "b": set()}) == []

@@ -7,6 +7,7 @@ from pathtracer.kernels import layout as L
 import pytest
 
 from pathtracer.backends import make_backend
+from pathtracer.backends.base import Backend
 from pathtracer.film import relmse
 from pathtracer.progressive import render
 from pathtracer.scene import SceneError, load_scene
@@ -333,9 +334,9 @@ def test_cpu_cuda_parity():
 def test_path_regeneration_changes_no_bit(name):
     """render_pixel runs a pixel's paths with path regeneration (the GPU in scenes without
     an environment), render_pixel_nested one after the other (the CPU, and the GPU in
-    scenes with one) through its own copy of the vertex steps (render_sample, kept for the
-    compilers' sake): both add the same samples in the same order, so the sums and ray
-    counts agree bit for bit. Run interpreted, on a few pixels (the principled grid: an
+    scenes with one; drivers.choose_driver), both around the one bounce (kernels.path):
+    both add the same samples in the same order, so the sums and ray counts agree bit for
+    bit. Run interpreted, on a few pixels (the principled grid: an
     HDRI, textures, glass and metal)."""
     from pathtracer.kernels.constants import STACK_SIZE
     from pathtracer.kernels.integrator import make_render_pixel
@@ -359,7 +360,7 @@ def test_path_regeneration_changes_no_bit(name):
 
 
 def test_escapes_looked_up_later_change_no_bit():
-    """The CPU's form for scenes with an environment map (integrator.render_pixel_deferred)
+    """The CPU's form for scenes with an environment map (drivers.deferred)
     queues each finished path in a ring of ESCAPE_RING records per row and finishes a path
     whose ray left the scene (the map's lookup, MIS, the pixel's sum) when the ring comes
     round, or at the row's end (drain_escapes): the sums and counts equal
@@ -402,14 +403,14 @@ def test_escapes_looked_up_later_change_no_bit():
 @pytest.mark.parametrize("name", ["cornell-box", "principled-grid"])
 def test_camera_packets_trace_the_single_rays_paths(name):
     """The CPU traces a pixel's camera rays in packets of eight when a pass has at least
-    PACKET_MIN_RAYS of them (integrator.next_camera_lane; kernels.wide.closest_hit_packet),
+    PACKET_MIN_RAYS of them (drivers.megakernel.next_camera_lane; kernels.wide.closest_hit_packet),
     one by one otherwise: one pass of 16 samples and 16 passes of one draw the same paths
     (the same ray counts, pixel by pixel) and sum to the same image up to rounding (the
     camera ray is computed in another inlined copy, which LLVM's fast-math contracts its
     own way: 4e-5 of the brightest pixel's sum on the principled grid, 2026-11-29; a camera
     ray's wrong hit would move a pixel by a sample's worth). The Cornell box renders one
     path after the other, the principled grid (an HDRI) through the ring of escaped rays."""
-    from pathtracer.kernels.integrator import PACKET_MIN_RAYS
+    from pathtracer.kernels.drivers.megakernel import PACKET_MIN_RAYS
     from pathtracer.scene import compile_scene, load_scene_description
     assert 1 < PACKET_MIN_RAYS <= 16
     desc = load_scene_description(os.path.join(ROOT, "scenes", name + ".json"))
@@ -491,7 +492,7 @@ def test_headless_passes_aim_at_pass_seconds(monkeypatch):
     h, w = scene.height, scene.width
     fixed, per_sample, pass_seconds = 0.002, 1e-4, 0.1
 
-    class Fake:
+    class Fake(Backend):
         name = "fake"
 
         def __init__(self):
@@ -541,8 +542,9 @@ def test_passes_launched_ahead_grow_as_passes_waited_for(monkeypatch):
     scene = load_scene(CORNELL)
     h, w = scene.height, scene.width
 
-    class Fake:
+    class Fake(Backend):
         name = "fake"
+        pipelined = True
 
         def __init__(self):
             self.scene = scene

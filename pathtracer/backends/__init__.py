@@ -1,4 +1,5 @@
-"""Backends: thin loops around the shared ``render_pixel`` device function.
+"""Backends: thin launchers of the kernel drivers (kernels.drivers), each implementing the
+protocol of :class:`.base.Backend`.
 
 ``cpu`` (``@njit(parallel=True)``, rows in parallel), ``cuda`` (one thread per pixel) and
 ``python`` (the same code interpreted: slow, for debugging one pixel).

@@ -6,10 +6,12 @@ import numpy as np
 from numba import get_num_threads, njit, prange
 
 from .._cache import compile_lock, jit_cache, read_only
+from .base import Backend
 
 from ..accel.wide import WIDE_STACK_SIZE, widen_bvh
 from ..kernels.device import FAST_MATH_FLAGS
-from ..kernels.layout import AOV_WIDTH, ESC_F_WIDTH, ESC_I_WIDTH, ESCAPE_RING, specialise
+from ..kernels.drivers import DEFERRED, choose_driver
+from ..kernels.layout import AOV_WIDTH, ESC_F_WIDTH, ESC_I_WIDTH, ESCAPE_RING
 from ..kernels.integrator import make_aov_pixel, make_deferred_pixel, make_render_pixel
 
 
@@ -46,11 +48,11 @@ def feature_bits(features):
 
 @functools.lru_cache(maxsize=None)
 def pass_kernel(features):
-    """The pass kernel for scenes with ``features``. With an environment map each row's
-    paths go through a ring whose records are finished a few paths later
-    (integrator.render_pixel_deferred: the escaped rays' texels prefetched meanwhile);
-    otherwise render_pixel adds a pixel's paths itself."""
-    deferred = specialise(features).env_map
+    """The pass kernel for scenes with ``features``: the driver that
+    kernels.drivers.choose_driver picks (deferred: each row's paths go through a ring whose
+    records are finished a few paths later, the escaped rays' texels prefetched meanwhile;
+    nested: render_pixel adds a pixel's paths itself)."""
+    deferred = choose_driver("cpu", features) == DEFERRED
     if deferred:
         render_pixel, drain = make_deferred_pixel(features)
     else:
@@ -114,7 +116,7 @@ def aov_kernel(features):
     return aov_pass
 
 
-class CPUBackend:
+class CPUBackend(Backend):
     name = "cpu"
 
     def __init__(self, scene):

@@ -29,11 +29,13 @@ if "NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS" not in os.environ:
         _c.CUDA_LOW_OCCUPANCY_WARNINGS = 0
 
 from .._cache import jit_cache
+from .base import Backend
 from .launch import Launcher
 
 from ..kernels.constants import STACK_SIZE
 from ..kernels.device import FAST_MATH_FLAGS
 from ..kernels.layout import AOV_WIDTH, specialise
+from ..kernels.drivers import WAVEFRONT, choose_driver, wave_min_paths_for
 from ..kernels.integrator import SceneArrays, make_aov_pixel, make_render_pixel, regenerates
 
 BLOCK = (16, 8)
@@ -69,34 +71,9 @@ def max_registers_for(features):
     return MAX_REGISTERS_ENV_MAP if specialise(features).env_map else MAX_REGISTERS
 
 
-# Where the wavefront kernels render (wavefront_for), passes of fewer camera paths than this
-# render with the megakernel: the host time of the wavefront's ~13 launches per pass is not
-# hidden behind a small pass's GPU time. Both kernels are compiled. Since the launches keep
-# their arguments' packing (backends.launch: ~30 us of host time a launch instead of ~180)
-# the wavefront wins from 0.5-0.8M paths: H200, 2026-11-26 (an ad-hoc probe of both kernels,
-# 256x192), wavefront / megakernel paths/s at 0.39 / 0.79 / 1.57M paths: bunny-studio 0.99 /
-# 1.12 / 1.30, the sun 0.96 / 1.05 / 1.23 (before it the two crossed at 1.5-2M: 2^21).
-WAVE_MIN_PATHS = 1 << 19
-# ... and from this many in scenes with mip-mapped textures, whose megakernel diverges most
-# (anisotropic probes at the first hits): the textured scene at 256x192, the same probe:
-# the wavefront 1.42x the megakernel at 0.10M paths, 1.76x at 0.20M, 1.96x at 0.39M
-# (docs/benchmarks.md, "Kernel launches that keep their arguments' packing").
-WAVE_MIN_PATHS_MIPMAPS = 1 << 17
-
-
-def wave_min_paths_for(features):
-    """The smallest pass (in paths) that the wavefront kernels render where they are the
-    default (wavefront_for)."""
-    return WAVE_MIN_PATHS_MIPMAPS if specialise(features).mipmaps else WAVE_MIN_PATHS
-
-
-def wavefront_for(features):
-    """Whether scenes with ``features`` render with the wavefront kernels
-    (backends.wavefront) rather than the megakernel: those with an HDRI, whose warps
-    diverge most (H100, 2026-11-24, bench.gpu_launch: bunny-studio 1.21-1.23x, sun
-    1.10-1.19x); not the others (the Cornell box, whose megakernel regenerates paths, lost
-    18-27 % to the wavefront without its miss queue)."""
-    return specialise(features).env_map
+# Which driver renders a pass (the megakernel with or without path regeneration, or the
+# wavefront, from how many paths): kernels.drivers.choose_driver, the one table. Where the
+# wavefront renders, both it and the megakernel (for small passes) are compiled.
 
 
 # fast=True: NVVM's approximate division and square root and flushed denormals (ftz=1,
@@ -281,8 +258,10 @@ def sample_groups(width, height, n_samples, target_threads=TARGET_THREADS):
     return max(1, min(n_samples, want, MAX_SLICES // pixels))
 
 
-class CUDABackend:
+class CUDABackend(Backend):
     name = "cuda"
+    pass_seconds = 0.25
+    pipelined = True
 
     def __init__(self, scene, block=BLOCK, max_registers=AUTO, fast=True,
                  target_threads=None, regenerate=None, wavefront=AUTO):
@@ -290,7 +269,7 @@ class CUDABackend:
         max_registers_for the scene's features, WAVE_MAX_REGISTERS for the wavefront's
         shading kernels); wavefront: render with the wavefront kernels (backends.wavefront)
         instead of the megakernel (True, or a dict of WavefrontLaunch's options; AUTO:
-        wavefront_for the scene's features)."""
+        kernels.drivers.choose_driver)."""
         self.scene = scene
         wave_registers = max_registers
         if max_registers == AUTO:
@@ -300,11 +279,12 @@ class CUDABackend:
         if regenerate is None:
             regenerate = regenerates(scene.features, "cuda")
         wave_threads = target_threads
-        # passes of fewer paths than this render with the megakernel (see WAVE_MIN_PATHS)
+        # passes of fewer paths than this render with the megakernel (kernels.drivers.WAVE_MIN_PATHS)
         self.wave_min_paths = 0
         if wavefront == AUTO:
             from .wavefront import fits
-            wavefront = wavefront_for(scene.features) and fits(scene.width, scene.height)
+            wavefront = (choose_driver("cuda", scene.features) == WAVEFRONT
+                         and fits(scene.width, scene.height))
             self.wave_min_paths = wave_min_paths_for(scene.features)
         if target_threads is None:
             target_threads = TARGET_THREADS_REGENERATING if regenerate else TARGET_THREADS

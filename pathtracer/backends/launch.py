@@ -6,7 +6,7 @@ scene's ~25 device arrays (shape, strides, pointer of each: ~255 parameters) tha
 ~180 us of host time per launch on an H200's host (2026-11-26, an ad-hoc probe: typing
 42 us, flattening 111 us, the driver's launch of the packed list 16 us). The wavefront's
 passes launch ~13 kernels, so a pass of fewer than ~2M paths was bound by the host
-(backends.cuda.WAVE_MIN_PATHS), and each progressive pass of the megakernel paid it too.
+(kernels.drivers.WAVE_MIN_PATHS), and each progressive pass of the megakernel paid it too.
 
 ``Launcher`` binds to the overload the first launch compiled (or found) and keeps, per
 argument position, the flattened parameters of the last device array (or tuple of device

@@ -4,9 +4,10 @@ import numpy as np
 from ..kernels.constants import STACK_SIZE
 from ..kernels.layout import AOV_WIDTH
 from ..kernels.integrator import make_aov_pixel, make_render_pixel
+from .base import Backend
 
 
-class PythonBackend:
+class PythonBackend(Backend):
     name = "python"
 
     def __init__(self, scene, pixels=None):

@@ -35,7 +35,7 @@ paths are shaded changes nothing in their numbers.
 Queues are appended with one atomic add per warp (a ballot of the lanes that append); a
 launch loops over its queue with a fixed grid, reading the queue's length on the GPU, so
 the host never waits between launches. Only scenes with an HDRI render this way, and only
-passes of at least backends.cuda.wave_min_paths_for paths (backends.cuda.wavefront_for).
+passes of at least kernels.drivers.wave_min_paths_for paths (kernels.drivers.choose_driver).
 """
 import functools
 

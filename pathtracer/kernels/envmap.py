@@ -154,7 +154,7 @@ def env_locate(env_img, env_info, d):
     """The cell of the map that direction d reads (env_cell: i0, i1, j0, j1, fx, fy) and
     d's y (cos theta): env_lookup's first half, which reads no texel (the CPU locates an
     escaped ray's cell when it queues the path and prefetches the texels, and looks them up
-    with env_lookup_cell a few paths later: integrator.render_pixel_deferred)."""
+    with env_lookup_cell a few paths later: drivers.deferred)."""
     h = env_img.shape[0]
     w = env_img.shape[1]
     u, v, y = env_uv(env_info, d)

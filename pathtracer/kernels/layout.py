@@ -264,7 +264,7 @@ STAT_NONFINITE = 2
 STATS_WIDTH = 3
 
 # ---- The CPU's ring of finished paths whose escaped ray is looked up later ----------------------
-# (integrator.render_pixel_deferred): per image row float32 (ESCAPE_RING, ESC_F_WIDTH) and
+# (drivers.deferred): per image row float32 (ESCAPE_RING, ESC_F_WIDTH) and
 # int32 (ESCAPE_RING, ESC_I_WIDTH)
 ESCAPE_RING = 8       # paths between a cell's prefetch and its lookup
 ESC_RADIANCE = 0      # the path's radiance before its escaped ray (3)

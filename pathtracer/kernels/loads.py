@@ -13,7 +13,7 @@ to 256 bytes; checked in ``backends.cuda``). On the CPU the load is marked 4-byt
 (x86 loads any alignment), so arrays from anywhere work.
 
 ``prefetch(a, i, j)`` asks the CPU to bring a[i, j]'s cache line in early (the sky's texels
-of an escaped ray whose lookup comes a few paths later: integrator.render_pixel_deferred).
+of an escaped ray whose lookup comes a few paths later: drivers.deferred).
 """
 from llvmlite import ir
 from numba import types

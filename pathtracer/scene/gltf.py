@@ -34,6 +34,7 @@ import warnings as _warnings
 import numpy as np
 
 from .errors import SceneError
+from .mesh_data import ObjMesh
 
 # componentType -> numpy type
 COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16,
@@ -793,7 +794,6 @@ def read_model(path):
 def load_gltf_mesh(path):
     """The triangles and materials of a glTF file as an ObjMesh (materials as scene-format
     dicts); warnings go through Python's warnings."""
-    from .meshes import ObjMesh
     model = read_model(path)
     for w in model.warnings:
         _warnings.warn(f"{path}: {w}", stacklevel=2)

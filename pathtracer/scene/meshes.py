@@ -12,31 +12,15 @@ import logging
 import os
 import re
 import tempfile
-from dataclasses import dataclass
-from typing import Optional
 
 import numpy as np
 
 from .errors import SceneError
+from .gltf import load_gltf_mesh
+from .mesh_data import ObjMesh
 from .serialized import read_serialized
 
 CACHE_VERSION = 6
-
-
-@dataclass
-class ObjMesh:
-    positions: np.ndarray          # float32 (F, 3, 3)
-    normals: Optional[np.ndarray]  # float32 (F, 3, 3) from `vn`, or None
-    uvs: Optional[np.ndarray]      # float32 (F, 3, 2) from `vt`, or None
-    face_material: np.ndarray      # int32 (F,): index into materials, -1 = no material
-    materials: list                # dicts: name, Kd, Ke, Ks, Ns, Ni, Pr, Pm, map_Kd, map_Bump
-    from_cache: bool = False
-    # "mtl": materials are .mtl dicts (above); "scene": materials in the JSON scene format
-    # (glTF files), read as a scene file's
-    material_format: str = "mtl"
-    # float32 (F, 3, 3) linear RGB vertex colours that multiply the base colour (glTF's
-    # COLOR_0), or None
-    colors: Optional[np.ndarray] = None
 
 
 def cache_dir():
@@ -76,7 +60,6 @@ def load_mesh(path, use_cache=True, shape_index=0):
     if ext == ".serialized":
         return load_serialized(path, shape_index)
     if ext in (".gltf", ".glb"):
-        from .gltf import load_gltf_mesh
         return load_gltf_mesh(path)
     return load_obj(path, use_cache=use_cache)
 
