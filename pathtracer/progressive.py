@@ -7,7 +7,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import limits
-from ._cache import jit_cache
 from .errors import Interrupted
 from .film import RELMSE_EPS, Film, compile_accumulation, error_estimate  # noqa: F401
 from .scene.compile import for_spp

@@ -132,13 +132,16 @@ out["furnace_mean"] = float(px.mean())
 out["furnace_se"] = float(px[:, 0].std(ddof=1) / np.sqrt(len(px)))
 out["nonfinite"] = int(st[..., 2].sum())
 # The features added for scenes written for Mitsuba and glTF: hidden emitters, a
-# one-sided material, vertex colours and a tilted environment map, CUDA code against the CPU
+# one-sided material, vertex colours, a tilted environment map and alpha (the glTF quad's
+# BLEND: stochastic transparency), CUDA code against the CPU
 from pathtracer.film import write_image
 from tests.gltf_writers import Builder
 tmp = tempfile.mkdtemp()
 write_image(tmp + "/sky.hdr", np.random.default_rng(1).random((8, 16, 3)).astype(np.float32))
 bld = Builder()
-mat = bld.material({"pbrMetallicRoughness": {"metallicFactor": 0}})
+mat = bld.material({"pbrMetallicRoughness": {"metallicFactor": 0,
+                                               "baseColorFactor": [1, 1, 1, 0.6]},
+                    "alphaMode": "BLEND"})
 bld.node(mesh=bld.mesh([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], [[0, 1, 2], [0, 2, 3]],
                        material=mat, colors=[[255, 0, 0], [0, 255, 0], [0, 0, 255], [255, 255, 0]]))
 bld.save(tmp + "/vc.glb")
@@ -156,7 +159,8 @@ new = {"camera": {"resolution": [6, 5], "position": [0.3, 0.2, 3], "lookAt": [0,
        "environment": {"file": "sky.hdr", "matrix": [[1, 0, 0], [0, 0, -1], [0, 1, 0]]}}
 ns = load_scene(write_scene(tmp, new))
 fe = ns.features
-out["new_features"] = [fe.hide_emitters, fe.one_sided, fe.vertex_colors, fe.env_map]
+out["new_features"] = [fe.hide_emitters, fe.one_sided, fe.vertex_colors, fe.env_map,
+                       fe.alpha]
 na = small_cuda(ns).render_pass(0, 2, 1, 7, 5)[0].copy()
 nb = CPUBackend(ns).render_pass(0, 2, 1, 7, 5)[0].copy()
 out["new_maxdiff"] = float(np.abs(na - nb).max())
@@ -197,5 +201,5 @@ def test_cuda_kernel_on_simulator():
     assert pipe["seen"] == [[1, 2], [3, 3], [7, 3]], pipe
     assert pipe["launches"] == [[0, 1], [1, 2], [3, 4]], pipe
     assert pipe["stopped_spp"] == 1 and pipe["again_equal"], pipe
-    assert out["new_features"] == [True] * 4 and out["new_sum"] > 0, out
+    assert out["new_features"] == [True] * 5 and out["new_sum"] > 0, out
     assert out["new_maxdiff"] < 1e-4, out

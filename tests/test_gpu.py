@@ -55,10 +55,11 @@ def test_no_float64_in_ptx():
     assert not f64, f64[:10]
 
 
-def _full_feature_scene(tmp_path):
+def _full_feature_scene(tmp_path, alpha=True):
     """Every kernel feature at once: principled materials with textures (mirrored and
     clamped) and a normal map, emissive triangles, a point light, a tilted HDRI, smooth
-    normals, a thin lens, vertex colours and hidden emitters."""
+    normals, a thin lens, vertex colours, hidden emitters and (``alpha``) a glTF quad with
+    alphaMode BLEND (the wavefront renders every feature but alpha)."""
     import imageio.v3 as iio
 
     from tests.helpers import sphere_mesh, write_scene
@@ -72,8 +73,9 @@ def _full_feature_scene(tmp_path):
     v, f = sphere_mesh(10, 20)
     from tests.gltf_writers import Builder
     b = Builder()
-    mat = b.material({"pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.9, 0.9, 1],
-                                               "metallicFactor": 0, "roughnessFactor": 0.6}})
+    mat = b.material({"pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.9, 0.9, 0.6],
+                                               "metallicFactor": 0, "roughnessFactor": 0.6},
+                      **({"alphaMode": "BLEND"} if alpha else {})})
     quad = np.array([[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]], float)
     b.node(mesh=b.mesh(quad, [[0, 2, 1], [0, 3, 2]], material=mat,
                        colors=[[255, 0, 0], [0, 255, 0], [0, 0, 255], [255, 255, 0]]),
@@ -104,7 +106,9 @@ def _full_feature_scene(tmp_path):
     from pathtracer.scene import load_scene
     s = load_scene(write_scene(tmp_path, scene))
     # every flag but the constant-colour environment (the HDRI replaces it)
-    assert all(v for k, v in s.features._asdict().items() if k != "environment"), s.features
+    assert all(v for k, v in s.features._asdict().items()
+               if k not in ("environment", "alpha")), s.features
+    assert s.features.alpha == alpha
     return s
 
 
@@ -156,7 +160,7 @@ def test_wavefront_equals_megakernel(tmp_path):
     and ray counts, with the pass in one launch or in sample ranges, with the tail finished
     in one launch or every vertex launched apart, and with pixels left out."""
     from pathtracer.backends.cuda import CUDABackend
-    s = _full_feature_scene(tmp_path)
+    s = _full_feature_scene(tmp_path, alpha=False)
     mega = CUDABackend(s, wavefront=False)
     a, sa = [x.copy() for x in mega.render_pass(0, 16, 1, 6, 2)]
     active = np.ones((s.height, s.width), np.uint8)

@@ -78,7 +78,17 @@ M_CLEARCOAT_GLOSS = 17
 M_SUBSURFACE = 18
 M_TRANSMISSION = 19
 M_ONE_SIDED = 20      # 1: reflects only on its front side, black from behind (oneSided)
-MAT_WIDTH = 21
+M_ALPHA = 21          # opacity in [0, 1] (a textured opacity: its texture, T_ALPHA)
+M_ALPHA_MODE = 22     # ALPHA_OPAQUE, ALPHA_MASK or ALPHA_BLEND
+M_ALPHA_CUTOFF = 23   # ALPHA_MASK: opaque where the opacity is >= this
+MAT_WIDTH = 24
+
+# Alpha modes (glTF's alphaMode): opaque (the opacity is not read), a cut-out (opaque where
+# the opacity reaches the cutoff, else absent) or stochastic transparency (a ray passes with
+# probability 1 - opacity).
+ALPHA_OPAQUE = 0
+ALPHA_MASK = 1
+ALPHA_BLEND = 2
 
 MAT_DIFFUSE = 0
 MAT_PRINCIPLED = 1
@@ -99,6 +109,7 @@ T_CLEARCOAT_GLOSS = 11
 T_SUBSURFACE = 12
 T_TRANSMISSION = 13
 T_NORMAL = 14
+T_ALPHA = 15
 N_SLOTS = 16
 NO_TEXTURE = -1
 
@@ -324,6 +335,13 @@ D_BSDF_V = 5
 D_BSDF_LOBE = 6       # reflection or refraction (the lobe: by reusing D_BSDF_U)
 D_RR = 7              # Russian roulette
 DIMS_PER_BOUNCE = 8
+# Stochastic transparency (ALPHA_BLEND) draws its numbers from the independent hash
+# (rng.sample_1d of the path's key), far above the sampler's dimensions: for the surfaces a
+# ray passes on the way to its hit at bounce b, dimension D_ALPHA + b * ALPHA_DIMS + k
+# (the k-th surface met), its shadow ray's from D_ALPHA_SHADOW on likewise.
+D_ALPHA = 1 << 20
+D_ALPHA_SHADOW = 1 << 21
+ALPHA_DIMS = 64
 
 
 class Features(NamedTuple):
@@ -348,6 +366,7 @@ class Features(NamedTuple):
     hide_emitters: bool = False
     vertex_colors: bool = False   # per-vertex colours multiply the base colour (tri_col)
     one_sided: bool = False       # a material that is black from behind (oneSided)
+    alpha: bool = False           # a cut-out or stochastically transparent material
     # The principled parameters some material sets above 0 (or textures): the BSDF's parts
     # that need them are compiled only then (kernels.principled.Lobes). True by default:
     # a feature set built without them compiles the whole BSDF. dielectric: some principled
@@ -387,6 +406,7 @@ class Specialisation(NamedTuple):
     hide_emitters: bool    # camera rays see no emitter (render.hideEmitters)
     vertex_colors: bool    # interpolated vertex colours multiply the base colour
     one_sided: bool        # some material reflects on its front side only
+    alpha: bool            # some material is cut out or transparent (M_ALPHA_MODE)
 
 
 def specialise(features):
@@ -406,7 +426,7 @@ def specialise(features):
         lobes=(f.dielectric, f.clearcoat, f.sheen, f.transmission, f.flatness, f.spec_tint,
                f.anisotropic),
         light_tree=f.light_tree and any_lights, hide_emitters=f.hide_emitters,
-        vertex_colors=f.vertex_colors, one_sided=f.one_sided)
+        vertex_colors=f.vertex_colors, one_sided=f.one_sided, alpha=f.alpha)
 
 
 class SceneArrays(NamedTuple):

@@ -30,13 +30,13 @@ import numpy as np
 
 from .camera import pinhole_ray, thin_lens_ray
 from .constants import INF, ONE, RR_MAX, ZERO
-from .device import step_marker
+from .device import device, step_marker
 from .emitters import make_emitters
-from .layout import (CAM_CONE, D_BSDF_LOBE, D_BSDF_U, D_BSDF_V, D_FIRST_BOUNCE, D_LENS_U,
+from .layout import (ALPHA_DIMS, D_ALPHA, D_ALPHA_SHADOW, CAM_CONE, D_BSDF_LOBE, D_BSDF_U, D_BSDF_V, D_FIRST_BOUNCE, D_LENS_U,
                      D_LENS_V, D_LIGHT_SELECT, D_LIGHT_U, D_LIGHT_V, D_PIXEL_X, D_PIXEL_Y,
                      D_RR, DIMS_PER_BOUNCE, M_ONE_SIDED, P_TRANSMISSION, STAT_BOUNCE_RAYS,
                      STAT_NONFINITE, STAT_SHADOW_RAYS, TRI_E1, TRI_E2, TRI_V0, specialise)
-from .rng import make_pair_opener, make_sampler
+from .rng import make_pair_opener, make_sampler, sample_1d
 from .scatter import make_scatter
 from .surface import make_surface
 from .textures import NO_FOOTPRINT, cone_footprint
@@ -50,6 +50,13 @@ from .wide import any_hit_wide, closest_hit_wide
 # cost 29 % of the textured scene's paths/s on an H100 (2026-11-23, bench.ab) for lookups
 # whose aliasing the indirect light's own averaging hides.
 MIP_LAST_BOUNCE = 1
+
+
+@device
+def hit_point(tri_v, tri, b1, b2):
+    """The point of triangle tri at barycentrics (b1, b2)."""
+    return madd(madd(load3(tri_v, tri, TRI_V0), load3(tri_v, tri, TRI_E1), b1),
+                load3(tri_v, tri, TRI_E2), b2)
 
 
 class PathState(NamedTuple):
@@ -114,7 +121,7 @@ class PathSteps(NamedTuple):
     escaped_path: object
     shade_surface: object
     path_vertex: object
-    trace_closest: object
+    trace_hit: object
     add_sample: object
     store_pixel: object
     spread_of: object
@@ -122,6 +129,7 @@ class PathSteps(NamedTuple):
 
 class SurfaceSteps(NamedTuple):
     """The steps at a surface hit (:func:`make_surface_steps`)."""
+    trace_hit: object
     surface_geometry: object
     emission_at: object
     surface_shading: object
@@ -139,19 +147,75 @@ def make_surface_steps(features, target="cpu"):
     step = step_marker(target)
     MIPMAPS = S.mipmaps
     VERTEX_COLORS = S.vertex_colors
+    ALPHA = S.alpha
     # The CPU traverses the eight-wide BVH (kernels.wide: SIMD box and triangle tests), whose
     # arrays its backend puts in the scene's bvh_box and bvh_child; the GPU the binary one.
     trace_any = any_hit_wide if target == "cpu" else any_hit
+    trace_closest = closest_hit_wide if target == "cpu" else closest_hit
     surface = make_surface(features, target)
     scatter = make_scatter(features, target)
     emitters = make_emitters(features, target)
     tri_uv_at, material_at, tinted, shading_frame, ray_origin = (
         surface.tri_uv_at, surface.material_at, surface.tinted, surface.shading_frame,
         surface.ray_origin)
+    opacity_at = surface.opacity_at
     local_wo, eval_world, sample_world, leave, side_normal, own_skip = (
         scatter.local_wo, scatter.eval_world, scatter.sample_world, scatter.leave,
         scatter.side_normal, scatter.own_skip)
     hit_emission = emitters.hit_emission
+
+    @step
+    def stops_ray(scene, tri, b1, b2, key, dim):
+        """Whether triangle tri's surface stops a ray at (b1, b2) (alpha: cut-outs and
+        stochastic transparency, surface.opacity_at, its number from the path's key and
+        dimension ``dim``)."""
+        tu, tv = tri_uv_at(scene.tri_uv, tri, b1, b2)
+        return opacity_at(scene.mat, scene.mat_tex, scene.tex_data, scene.tex_int,
+                          scene.tex_f, scene.tri_mat[tri], tu, tv, sample_1d(key, dim))
+
+    @step
+    def trace_hit(scene, o, d, skip, key, dim, stack):
+        """The closest surface that stops the ray (o, d): trace_closest's (t, tri, b1, b2),
+        and in scenes with alpha the hits that let the ray pass skipped (the ray goes on
+        from each; t counts from o). ``key``, ``dim``: the path's key (its sampler state's
+        first word) and the first dimension of the numbers that transparency draws."""
+        t, tri, b1, b2 = trace_closest(o, d, INF, skip, scene.tri_v, scene.bvh_box,
+                                       scene.bvh_child, stack)
+        if ALPHA:
+            t_done = ZERO
+            k = 0
+            while tri >= 0 and k < ALPHA_DIMS and not stops_ray(scene, tri, b1, b2, key,
+                                                                 dim + k):
+                # on from the hit point (from the triangle's own coordinates: not pushed
+                # off the surface, the triangle itself skipped)
+                t_done += t
+                o = hit_point(scene.tri_v, tri, b1, b2)
+                t, tri, b1, b2 = trace_closest(o, d, INF, tri, scene.tri_v, scene.bvh_box,
+                                               scene.bvh_child, stack)
+                k += 1
+            t += t_done
+        return t, tri, b1, b2
+
+    @step
+    def occluded(scene, o, d, t_max, skips, key, stack):
+        """Whether the shadow ray (o, d) meets a surface that stops it before t_max:
+        trace_any, skipping skips (the shading point's and the light's triangles); in
+        scenes with alpha a loop of closest hits past the surfaces that let it through."""
+        if not ALPHA:
+            return trace_any(o, d, t_max, skips[0], skips[1], scene.tri_v, scene.bvh_box,
+                             scene.bvh_child, stack)
+        skip = skips[0]
+        for k in range(ALPHA_DIMS):
+            t, tri, b1, b2 = trace_closest(o, d, t_max, skip, scene.tri_v, scene.bvh_box,
+                                           scene.bvh_child, stack)
+            if tri < 0 or tri == skips[1]:
+                return False
+            if stops_ray(scene, tri, b1, b2, key[0], key[1] + k):
+                return True
+            o = hit_point(scene.tri_v, tri, b1, b2)
+            t_max -= t
+            skip = tri
+        return True
 
     @step
     def surface_geometry(scene, d, hit, bounce, cone, spread):
@@ -202,18 +266,17 @@ def make_surface_steps(features, target="cpu"):
                        bitangent, wp, local_wo(geo.wo, tangent, bitangent, ns), origin)
 
     @step
-    def direct_light(beta, sh, geo, tri, emitter, scene, stack):
+    def direct_light(beta, sh, geo, tri, emitter, scene, stack, key):
         """The one shadow-ray-and-MIS tail of next-event estimation, for every emitter
         kind (``emitter``: a sample_emitter record): (radiance added, shadow rays
-        traced)."""
+        traced). ``key``: (path key, first dimension) of transparency's numbers."""
         wi, t_max, le, pdf_light, is_delta, light_tri = emitter
         f, pdf_bsdf = eval_world(sh.is_principled, sh.params, geo.wo, sh.wo_l, wi,
                                  sh.tangent, sh.bitangent, sh.ns, sh.ng, sh.wp)
         if not (max_comp(f) > ZERO):
             return (ZERO, ZERO, ZERO), 0
-        if trace_any(leave(geo.p, sh.ng, wi, sh.origin), wi, t_max,
-                     own_skip(tri, sh.ng_tri, sh.ng, wi), light_tri, scene.tri_v,
-                     scene.bvh_box, scene.bvh_child, stack):
+        if occluded(scene, leave(geo.p, sh.ng, wi, sh.origin), wi, t_max,
+                    (own_skip(tri, sh.ng_tri, sh.ng, wi), light_tri), key, stack):
             return (ZERO, ZERO, ZERO), 1
         if is_delta:
             weight = ONE / pdf_light
@@ -231,7 +294,7 @@ def make_surface_steps(features, target="cpu"):
         return (leave(geo.p, sh.ng, wi, sh.origin), wi, own_skip(tri, sh.ng_tri, sh.ng, wi),
                 weight, pdf_bsdf)
 
-    return SurfaceSteps(surface_geometry, emission_at, surface_shading, direct_light, next_ray,
+    return SurfaceSteps(trace_hit, surface_geometry, emission_at, surface_shading, direct_light, next_ray,
                         emitters.sample_emitter)
 
 
@@ -246,7 +309,6 @@ def make_path(features, target="cpu"):
     NEE = S.nee
     MIPMAPS = S.mipmaps
     ONE_SIDED = S.one_sided
-    trace_closest = closest_hit_wide if target == "cpu" else closest_hit
     open_set, draw = make_sampler(S.sobol, table=target == "cpu")[1:]
     # The CPU's sobol sampler returns a set's four numbers when the set is opened
     # (rng.make_sampler), so Russian roulette draws from the BSDF set the bounce opened
@@ -264,7 +326,7 @@ def make_path(features, target="cpu"):
     V = make_surface_steps(features, target)
     (surface_geometry, emission_at, surface_shading, direct_light, next_ray) = (
         V.surface_geometry, V.emission_at, V.surface_shading, V.direct_light, V.next_ray)
-    sample_emitter = V.sample_emitter
+    sample_emitter, trace_hit = V.sample_emitter, V.trace_hit
     escaped = make_emitters(features, target).escaped
 
     @step
@@ -382,8 +444,9 @@ def make_path(features, target="cpu"):
                                      draw(state, light_dims, dim + D_LIGHT_U),
                                      draw(state, light_dims, dim + D_LIGHT_V))
             if emitter[3] > ZERO:       # pdf_light
-                contribution, n_shadow_rays = direct_light(beta, sh, geo, hit.tri, emitter,
-                                                           scene, stack)
+                contribution, n_shadow_rays = direct_light(
+                    beta, sh, geo, hit.tri, emitter, scene, stack,
+                    (state[0], D_ALPHA_SHADOW + bounce * ALPHA_DIMS))
                 radiance = add(radiance, contribution)
         # ---- BSDF sampling: the next ray ----
         if OPEN_BSDF_SET:
@@ -403,8 +466,8 @@ def make_path(features, target="cpu"):
     def path_vertex(path, spread, state, max_bounces, rr_depth, scene, stack):
         """One vertex of a path: the ray traced, then escaped_path or shade_surface
         (shade_surface's answer)."""
-        t, tri, b1, b2 = trace_closest(path.o, path.d, INF, path.skip, scene.tri_v,
-                                       scene.bvh_box, scene.bvh_child, stack)
+        t, tri, b1, b2 = trace_hit(scene, path.o, path.d, path.skip, state[0],
+                                   D_ALPHA + path.bounce * ALPHA_DIMS, stack)
         if tri < 0:
             return escaped_path(scene, path), 0, 0, False
         return shade_surface(path, Hit(t, tri, b1, b2), spread, state, max_bounces,
@@ -412,4 +475,4 @@ def make_path(features, target="cpu"):
 
     return PathSteps(camera_ray, start_camera_path, path_state, surface_geometry,
                      surface_shading, emission_at, next_ray, escaped_path, shade_surface,
-                     path_vertex, trace_closest, add_sample, store_pixel, spread_of)
+                     path_vertex, trace_hit, add_sample, store_pixel, spread_of)

@@ -12,7 +12,8 @@ import numpy as np
 
 from .constants import HORIZON_EPS, ONE, OFFSET_REL, TWO, ZERO
 from .device import device, step_marker
-from .layout import (P_ANISOTROPIC, P_BASE, P_CLEARCOAT, P_CLEARCOAT_GLOSS, P_ETA,
+from .layout import (ALPHA_BLEND, ALPHA_MASK, M_ALPHA, M_ALPHA_CUTOFF, M_ALPHA_MODE, T_ALPHA,
+                     P_ANISOTROPIC, P_BASE, P_CLEARCOAT, P_CLEARCOAT_GLOSS, P_ETA,
                      P_FLATNESS, P_METALLIC, P_ROUGHNESS, P_SHEEN, P_SHEEN_TINT,
                      P_SPEC_TINT, P_TRANSMISSION, M_ALBEDO, M_ANISOTROPIC, M_CLEARCOAT,
                      M_CLEARCOAT_GLOSS, M_EMISSION,
@@ -25,7 +26,7 @@ from .layout import (P_ANISOTROPIC, P_BASE, P_CLEARCOAT, P_CLEARCOAT_GLOSS, P_ET
                      TRI_T2, TRI_T_SIGN, TRI_UV0,
                      TRI_UV1, TRI_UV2, specialise)
 from .normalmap import clamp_mapped_normal, mapped_normal_seeing
-from .textures import make_tex_lookup
+from .textures import NO_FOOTPRINT, make_tex_lookup
 from .vec import (add, cross, dot, frame, load3, luminance, madd, max_abs, neg, normalize,
                   scale)
 
@@ -84,6 +85,7 @@ def unit(x):
 
 class SurfaceSteps(NamedTuple):
     tri_uv_at: object
+    opacity_at: object
     material_at: object
     tinted: object
     emitted: object
@@ -134,6 +136,22 @@ def make_surface(features, target="cpu"):
                     b0 * tri_uv[tri, TRI_UV0 + 1] + b1 * tri_uv[tri, TRI_UV1 + 1] +
                     b2 * tri_uv[tri, TRI_UV2 + 1])
         return ZERO, ZERO
+
+    @step
+    def opacity_at(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v, u_blend):
+        """Whether material m's surface stops a ray at texture coordinates (u, v): always,
+        unless its alpha mode is ALPHA_MASK (where the opacity, M_ALPHA or its texture read
+        at the base level, reaches M_ALPHA_CUTOFF) or ALPHA_BLEND (with probability the
+        opacity: ``u_blend`` a uniform number; stochastic transparency, unbiased, as
+        Cycles and pbrt-v4 do)."""
+        mode = mat[m, M_ALPHA_MODE]
+        if mode != ALPHA_MASK and mode != ALPHA_BLEND:
+            return True
+        a = param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_ALPHA, M_ALPHA, u, v,
+                   NO_FOOTPRINT)
+        if mode == ALPHA_MASK:
+            return a >= mat[m, M_ALPHA_CUTOFF]
+        return u_blend < a
 
     @step
     def emitted(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v, fp):
@@ -293,5 +311,5 @@ def make_surface(features, target="cpu"):
                 params[P_CLEARCOAT], params[P_CLEARCOAT_GLOSS], params[P_FLATNESS],
                 params[P_TRANSMISSION])
 
-    return SurfaceSteps(tri_uv_at, material_at, tinted, emitted, shading_frame, ray_origin)
+    return SurfaceSteps(tri_uv_at, opacity_at, material_at, tinted, emitted, shading_frame, ray_origin)
 

@@ -33,6 +33,8 @@ from ..kernels.layout import (CAM_CONE, CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_
                               ENV_TEXEL_WIDTH,
                               FILTER_BILINEAR, FILTER_NEAREST, FILTER_TRILINEAR,
                               LT_LINK_WIDTH, LT_WIDTH,
+                              ALPHA_BLEND, ALPHA_MASK, ALPHA_OPAQUE, M_ALPHA, M_ALPHA_CUTOFF,
+                              M_ALPHA_MODE, T_ALPHA,
                               M_ALBEDO, M_ANISOTROPIC, M_EMISSION, M_ETA, M_ONE_SIDED,
                               M_TWO_SIDED, M_TYPE,
                               MAT_DIFFUSE, MAT_PRINCIPLED, MAT_WIDTH, MATERIAL_PARAMS, N_SLOTS,
@@ -170,6 +172,7 @@ def compile_scene(desc, use_cache=True, bvh_options=None, memo=None):
         mipmaps=use_textures and any(p[0] == "trilinear" for p in tables.tex_params),
         light_tree=tree is not None, hide_emitters=desc.render.hide_emitters,
         vertex_colors=tri.has_colors, one_sided=bool((mat[:, M_ONE_SIDED] > 0).any()),
+        alpha=bool((mat[:, M_ALPHA_MODE] != ALPHA_OPAQUE).any()),
         **principled_lobes(mat, mat_tex))
     cam = camera_array(desc.camera, tri.shift, desc.render.spp)
     if not (np.isfinite(cam).all() and np.abs(cam).max() <= limits.FLOAT32_MAX):
@@ -313,15 +316,23 @@ class MaterialTables:
         return self._default
 
     def add(self, mtype, albedo, emission, two_sided, numbers=None, textures=None,
-            normal_map=None, one_sided=False):
+            normal_map=None, one_sided=False, alpha=(1.0, "opaque", 0.5)):
+        """A material's row (``alpha``: opacity, mode and cutoff, loader.Material's)."""
         row = np.zeros(MAT_WIDTH, np.float32)
         row[M_ONE_SIDED] = 1.0 if one_sided else 0.0
         tex = np.full(N_SLOTS, NO_TEXTURE, np.int32)
+        textures = textures or {}
+        opacity, mode, cutoff = alpha
+        row[M_ALPHA] = opacity
+        row[M_ALPHA_MODE] = {"opaque": ALPHA_OPAQUE, "mask": ALPHA_MASK,
+                             "blend": ALPHA_BLEND}[mode]
+        row[M_ALPHA_CUTOFF] = cutoff
+        if mode != "opaque" and "alpha" in textures:
+            tex[T_ALPHA] = self.texture(textures["alpha"], "alpha")
         row[M_ALBEDO:M_ALBEDO + 3] = albedo
         row[M_EMISSION:M_EMISSION + 3] = emission
         row[M_TWO_SIDED] = 1.0 if two_sided else 0.0
         row[M_TYPE] = MAT_PRINCIPLED if mtype == "principled" else MAT_DIFFUSE
-        textures = textures or {}
         power = float(np.mean(emission))
         if "albedo" in textures:
             tex[T_ALBEDO] = self.texture(textures["albedo"], "albedo")
@@ -408,7 +419,8 @@ def compile_materials(desc, memo=None):
     mat_index = {}
     for name, m in desc.materials.items():
         mat_index[name] = tables.add(m.type, m.albedo, m.emission, m.two_sided, m.numbers,
-                                     m.textures, m.normal_map, m.one_sided)
+                                     m.textures, m.normal_map, m.one_sided,
+                                     (m.alpha, m.alpha_mode, m.alpha_cutoff))
     return tables, mat_index
 
 
@@ -456,6 +468,7 @@ def _check_uvs(desc, objects, tables):
     would look up one texel everywhere: an error rather than a silently wrong image."""
     slot_names = {p.slot: p.key for p in MATERIAL_PARAMS}
     slot_names[T_NORMAL] = "normalMap"
+    slot_names[T_ALPHA] = "alpha"
     for obj, geo in zip(desc.objects, objects):
         if geo.uv is not None or not len(geo.materials):
             continue
@@ -579,7 +592,8 @@ def _object_triangles(obj, desc, tables, mat_index, use_cache, memo=None):
             if mesh.material_format == "scene":      # glTF: scene-format materials
                 m = scene_material(mm, obj.file)
                 local[i] = tables.add(m.type, m.albedo, m.emission, m.two_sided, m.numbers,
-                                      m.textures, m.normal_map, m.one_sided)
+                                      m.textures, m.normal_map, m.one_sided,
+                                      (m.alpha, m.alpha_mode, m.alpha_cutoff))
             else:
                 local[i] = obj_material(tables, mm, os.path.dirname(obj.file), desc.path,
                                         f"{where}/file")

@@ -458,8 +458,7 @@ class GltfModel:
             self.emissive = True
             if m.doubleSided:
                 out["twoSided"] = True
-        if (m.alphaMode or "OPAQUE") != "OPAQUE":
-            self.warn(f"{mw}: alphaMode {m.alphaMode} not supported (rendered opaque)")
+        self._alpha(m, pbr, base, out, mw, sets)
         if "KHR_materials_pbrSpecularGlossiness" in ext:
             self._specular_glossiness(ext["KHR_materials_pbrSpecularGlossiness"], out, mw, sets)
         if "KHR_materials_unlit" in ext:
@@ -583,6 +582,26 @@ class GltfModel:
     def _add(self, material):
         self.materials.append(material)
         return len(self.materials) - 1
+
+    def _alpha(self, m, pbr, base, out, mw, sets):
+        """alphaMode MASK (with alphaCutoff) and BLEND: the opacity is the base colour's
+        alpha (its factor times its texture's alpha channel, which is linear); OPAQUE
+        ignores it, as the specification says. BLEND is rendered as stochastic
+        transparency (a ray passes with probability 1 - alpha), whose mean is the blend."""
+        mode = m.alphaMode or "OPAQUE"
+        if mode == "OPAQUE":
+            return
+        if mode not in ("MASK", "BLEND"):
+            raise self.error(f"alphaMode {mode!r}: expected OPAQUE, MASK or BLEND",
+                             mw + "/alphaMode")
+        out["alphaMode"] = mode.lower()
+        if mode == "MASK":
+            out["alphaCutoff"] = 0.5 if m.alphaCutoff is None else float(m.alphaCutoff)
+        alpha = float(base[3]) if len(base) > 3 else 1.0
+        out["alpha"] = alpha
+        if pbr and pbr.baseColorTexture is not None:
+            out["alpha"] = self._texture(pbr.baseColorTexture, "linear", alpha, "a",
+                                         mw + "/pbrMetallicRoughness/baseColorTexture", sets)
 
     def _texture(self, info, color_space, scale, channel, where, sets):
         """A texture value in the scene format for a glTF textureInfo."""

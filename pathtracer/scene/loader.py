@@ -82,6 +82,9 @@ class Material:
     emission: tuple = EMISSION_DEFAULT
     two_sided: bool = False
     one_sided: bool = False    # reflects on its front side only (black from behind)
+    alpha: float = 1.0         # opacity (textures["alpha"]: from a texture)
+    alpha_mode: str = "opaque"  # "opaque", "mask" (cut out below alpha_cutoff), "blend"
+    alpha_cutoff: float = 0.5
     pointer: str = ""
     numbers: dict = field(default_factory=dict)    # principled number parameters
     textures: dict = field(default_factory=dict)   # parameter key -> TextureSpec
@@ -558,6 +561,7 @@ def _material(n, base):
                                    "emission", COLOR_LIMITS["emission"])
     m.two_sided = n.boolean("twoSided", False)
     m.one_sided = n.boolean("oneSided", False)
+    _alpha(n, m, base)
     if mtype == "principled":
         if n.has("eta") and n.has("specular"):
             raise n.error("give 'specular' or 'eta', not both (each sets the other)", "eta")
@@ -580,6 +584,24 @@ def _material(n, base):
                 raise n.error(f"'{k}' belongs to the principled material, not 'diffuse'", k)
     n.finish()
     return m
+
+
+ALPHA_MODES = ("opaque", "mask", "blend")
+
+
+def _alpha(n, m, base):
+    """A material's opacity: ``alpha`` (a number in [0, 1] or a one-channel texture, e.g.
+    an image's alpha with ``"channel": "a"``), ``alphaMode`` (opaque: alpha is not read;
+    mask: a cut-out, opaque where alpha >= ``alphaCutoff``; blend: stochastic transparency)
+    and ``alphaCutoff`` (default 0.5), as glTF's alphaMode."""
+    m.alpha_mode = n.string("alphaMode", "opaque", choices=ALPHA_MODES)
+    m.alpha_cutoff = n.number("alphaCutoff", 0.5, lo=0.0, hi=1.0)
+    if n.has("alpha"):
+        v = n.raw("alpha")
+        if isinstance(v, (str, dict)):
+            m.textures["alpha"] = _texture_spec(n, "alpha", base, "linear")
+        else:
+            m.alpha = n.number("alpha", lo=0.0, hi=1.0)
 
 
 def scene_material(data, file):

@@ -698,7 +698,7 @@ def _bsdf(r, el, name):
     (diffuse, principled without transmission, conductors) are black from behind unless
     wrapped in twosided: oneSided (checked against Mitsuba 3.9.1's evaluation)."""
     mat = _bsdf_kind(r, el, name)
-    if el.get("type") != "twosided" and not mat.get("transmission"):
+    if el.get("type") not in ("twosided", "mask") and not mat.get("transmission"):
         mat["oneSided"] = True
     return mat
 
@@ -715,6 +715,22 @@ def _bsdf_kind(r, el, name):
         # emitter never does: here only the BSDF reflects on both sides
         mat = _bsdf(r, _deref(r, inner[0]), name)
         mat.pop("oneSided", None)
+        return mat
+    if kind == "mask":
+        # Mitsuba's mask: its nested BSDF where a ray meets it with probability `opacity`
+        # (a float or a texture, default 0.5), else a null interaction: stochastic
+        # transparency, alphaMode blend (a textured opacity read as its luminance)
+        inner = [c for c in el if c.tag in ("bsdf", "ref")]
+        if len(inner) != 1:
+            raise r.error("mask takes one BSDF", el)
+        mat = _bsdf(r, _deref(r, inner[0]), name)
+        opacity = p.get("opacity", ("float", None))
+        if opacity[0] in ("texture", "ref"):
+            mat["alpha"] = _rgb_or_texture(r, el, opacity)
+        else:
+            mat["alpha"] = min(max(float(r.value(opacity[1])), 0.0), 1.0) \
+                if opacity[1] is not None else 0.5
+        mat["alphaMode"] = "blend"
         return mat
     if kind == "diffuse":
         mat = {"name": name, "type": "diffuse"}

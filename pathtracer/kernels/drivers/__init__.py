@@ -63,7 +63,9 @@ def choose_driver(target, features, paths=None):
       thread runs one path at a time either way.
     - CUDA: ``wavefront`` with an environment map, whose warps diverge most (H100,
       2026-11-24, bench.gpu_launch: bunny-studio 1.21-1.23x, the sun 1.10-1.19x), in passes
-      of at least wave_min_paths_for(features) paths; the Cornell box lost 18-27 % to it.
+      of at least wave_min_paths_for(features) paths, unless a material has alpha (the
+      wavefront's trace launch has no sampler state for stochastic transparency); the
+      Cornell box lost 18-27 % to it.
       Else the megakernel: ``regenerating`` without an environment (the Cornell box +15 %,
       H100, 2026-11-23), ``nested`` with one (one path after the other measured 4-9 %
       faster where the vertices diverge anyway).
@@ -73,7 +75,7 @@ def choose_driver(target, features, paths=None):
     if target == "cpu":
         return DEFERRED if S.env_map else NESTED
     if target == "cuda":
-        if S.env_map and (paths is None or paths >= wave_min_paths_for(features)):
+        if S.env_map and not S.alpha and (paths is None or paths >= wave_min_paths_for(features)):
             return WAVEFRONT
         return NESTED if S.any_environment else REGENERATING
     return NESTED

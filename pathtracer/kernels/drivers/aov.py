@@ -5,10 +5,10 @@ import functools
 
 import numpy as np
 
-from ..constants import INF, ONE, ZERO
+from ..constants import ONE, ZERO
 from ..device import device, entry_marker
 from ..emitters import make_emitters
-from ..layout import (AOV_ALBEDO, AOV_NORMAL, D_BSDF_LOBE, D_BSDF_U, D_BSDF_V,
+from ..layout import (ALPHA_DIMS, D_ALPHA, AOV_ALBEDO, AOV_NORMAL, D_BSDF_LOBE, D_BSDF_U, D_BSDF_V,
                       D_FIRST_BOUNCE, DIMS_PER_BOUNCE, P_BASE, P_METALLIC, P_ROUGHNESS,
                       P_TRANSMISSION, specialise)
 from ..path import Hit, make_path
@@ -36,9 +36,9 @@ def make_aov(features, target="cpu"):
     entry = entry_marker(target)
     P = make_path(features, target)
     (camera_ray, emission_at, next_ray, path_state, spread_of, start_camera_path,
-     surface_geometry, surface_shading, trace_closest) = (
+     surface_geometry, surface_shading, trace_hit) = (
         P.camera_ray, P.emission_at, P.next_ray, P.path_state, P.spread_of,
-        P.start_camera_path, P.surface_geometry, P.surface_shading, P.trace_closest)
+        P.start_camera_path, P.surface_geometry, P.surface_shading, P.trace_hit)
     start_path, open_set, draw = make_sampler(S.sobol, table=target == "cpu")
     ANY_ENVIRONMENT = S.any_environment
     TRI_LIGHTS = S.tri_lights
@@ -68,8 +68,8 @@ def make_aov(features, target="cpu"):
             albedo = (ZERO, ZERO, ZERO)
             normal = (ZERO, ZERO, ZERO)
             for bounce in range(AOV_MAX_SPECULAR + 1):
-                t, tri, b1, b2 = trace_closest(o, d, INF, path.skip, scene.tri_v,
-                                                 scene.bvh_box, scene.bvh_child, stack)
+                t, tri, b1, b2 = trace_hit(scene, o, d, path.skip, state[0],
+                                           D_ALPHA + bounce * ALPHA_DIMS, stack)
                 if tri < 0:
                     if ANY_ENVIRONMENT:
                         le = escaped(scene.env, scene.env_img, scene.env_info, d, ZERO)[0]

@@ -18,7 +18,7 @@ from ..constants import INF, ONE, ZERO
 from ..device import entry_marker, step_marker
 from ..path import Hit, make_path
 from ..rng import make_sampler
-from ..layout import specialise
+from ..layout import ALPHA_DIMS, D_ALPHA, specialise
 from ..wide import PACKET, closest_hit_packet, packet_ray_hit, packet_set_ray
 
 # The fewest camera rays traced as a packet (kernels.wide.closest_hit_packet; fewer: one by
@@ -45,14 +45,15 @@ def make_megakernel(features, target="cpu"):
     entry_inlined = entry_marker(target, inlined=True)
     P = make_path(features, target)
     (add_sample, camera_ray, escaped_path, path_state, path_vertex, shade_surface,
-     spread_of, start_camera_path, store_pixel, trace_closest) = (
+     spread_of, start_camera_path, store_pixel, trace_hit) = (
         P.add_sample, P.camera_ray, P.escaped_path, P.path_state, P.path_vertex,
-        P.shade_surface, P.spread_of, P.start_camera_path, P.store_pixel, P.trace_closest)
+        P.shade_surface, P.spread_of, P.start_camera_path, P.store_pixel, P.trace_hit)
     start_path = make_sampler(S.sobol, table=target == "cpu")[0]
     ANY_ENVIRONMENT = S.any_environment
     # The CPU traces a pixel's camera rays eight at a time (camera_packet below), and each
     # path starts from its ray's hit.
-    CAMERA_PACKETS = target == "cpu"
+    # (Not with alpha: a camera ray may pass the surface its packet hit.)
+    CAMERA_PACKETS = target == "cpu" and not S.alpha
 
     @entry
     def render_pixel(px, py, sample_start, n_samples, seed, max_bounces, rr_depth, scene,
@@ -142,8 +143,8 @@ def make_megakernel(features, target="cpu"):
         n_shadow_rays = 0
         while True:
             if not camera_hit:
-                t, tri, b1, b2 = trace_closest(path.o, path.d, INF, path.skip, scene.tri_v,
-                                                 scene.bvh_box, scene.bvh_child, stack)
+                t, tri, b1, b2 = trace_hit(scene, path.o, path.d, path.skip, state[0],
+                                           D_ALPHA + path.bounce * ALPHA_DIMS, stack)
             camera_hit = False
             if tri < 0:
                 return path, n_bounce_rays, n_shadow_rays, ANY_ENVIRONMENT

@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..constants import INF, ZERO
+from ..constants import ZERO
 from ..device import entry_marker, step_marker
 from ..layout import (HIT_B1, HIT_B2, HIT_T, PATH_BETA, PATH_BOUNCE, PATH_BOUNCE_RAYS,
                       PATH_CONE, PATH_D, PATH_O, PATH_PDF_PREV, PATH_RADIANCE,
@@ -38,15 +38,19 @@ class Wavefront(NamedTuple):
 
 @functools.lru_cache(maxsize=None)
 def make_wavefront(features, target="cuda"):
-    """The wavefront entries (:class:`Wavefront`) for scenes with ``features``."""
+    """The wavefront entries (:class:`Wavefront`) for scenes with ``features``. Not for
+    scenes with alpha: its trace launch has no sampler state for stochastic transparency
+    (choose_driver gives them the megakernel)."""
     S = specialise(features)
+    if S.alpha:
+        raise ValueError("the wavefront driver does not render scenes with alpha")
     step = step_marker(target)
     entry = entry_marker(target)
     P = make_path(features, target)
     (add_sample, camera_ray, escaped_path, path_state, path_vertex, shade_surface,
-     spread_of, start_camera_path, store_pixel, trace_closest) = (
+     spread_of, start_camera_path, store_pixel, trace_hit) = (
         P.add_sample, P.camera_ray, P.escaped_path, P.path_state, P.path_vertex,
-        P.shade_surface, P.spread_of, P.start_camera_path, P.store_pixel, P.trace_closest)
+        P.shade_surface, P.spread_of, P.start_camera_path, P.store_pixel, P.trace_hit)
     start_path = make_sampler(S.sobol, table=target == "cpu")[0]
     ANY_ENVIRONMENT = S.any_environment
 
@@ -103,9 +107,8 @@ def make_wavefront(features, target="cuda"):
     @entry
     def wave_trace(path, scene, paths_f, paths_i, stack):
         """The closest hit (t, tri, b1, b2) of path ``path``'s ray (tri < 0: none)."""
-        return trace_closest(load3f(paths_f, PATH_O, path), load3f(paths_f, PATH_D, path),
-                               INF, paths_i[PATH_SKIP, path], scene.tri_v, scene.bvh_box,
-                               scene.bvh_child, stack)
+        return trace_hit(scene, load3f(paths_f, PATH_O, path), load3f(paths_f, PATH_D, path),
+                         paths_i[PATH_SKIP, path], 0, 0, stack)
 
     @entry
     def store_hit(hits_f, hits_i, slot, t, tri, b1, b2):
