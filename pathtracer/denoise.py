@@ -33,8 +33,8 @@ def check_available():
     try:
         importlib.import_module("pyoidn")
     except Exception as e:      # ImportError, or a library that fails to load
-        raise InputError(f"--denoise needs Open Image Denoise's Python binding "
-                         f"(pip install pyoidn): {type(e).__name__}: {e}") from None
+        raise InputError(f"--denoise needs Open Image Denoise's Python binding: pip install "
+                         f"'pt-render[denoise]' (or pyoidn) ({type(e).__name__}: {e})") from None
 
 
 DEVICES = ("auto", "cpu", "cuda")

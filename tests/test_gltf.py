@@ -174,8 +174,13 @@ def test_texture_transform_sampler_and_unsupported_things_warn(tmp_path):
     # glTF v' = 3 v + 0.1 with v flipped: ours v' = 3 v + (1 - 3 - 0.1)
     assert spec["tile"] == [2, 3] and spec["offset"] == [0.25, pytest.approx(-2.1)]
     text = " | ".join(m.warnings)
-    for words in ("alphaMode BLEND", "scale 0.5", "KHR_materials_volume"):
+    for words in ("scale 0.5", "KHR_materials_volume"):
         assert words in text, words
+    # alphaMode BLEND is read (the base colour texture's alpha channel), not warned
+    assert "alphaMode" not in text
+    alpha = m.materials[0]["alpha"]
+    assert m.materials[0]["alphaMode"] == "blend" and alpha["channel"] == "a"
+    assert alpha["colorSpace"] == "linear" and alpha["filter"] == "nearest"
     # the mapping is right: a texel lookup at glTF uv (u, v) reads what glTF reads
     u, v = 0.3, 0.2                                  # glTF coordinates, v down
     gu, gv = 2 * u + 0.25, 3 * v + 0.1               # glTF's transformed coordinates

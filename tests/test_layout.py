@@ -268,7 +268,8 @@ def test_docs_loader_and_layout_agree_on_material_parameters(tmp_path):
         assert float(default) == expected, (p.key, default)
         if p.kind == "number" and (p.lo, p.hi) == (0.0, 1.0):
             assert meaning.startswith("[0, 1]"), (p.key, meaning)
-    documented_params = set(doc) - {"normalMap", "twoSided", "oneSided"}
+    documented_params = set(doc) - {"normalMap", "twoSided", "oneSided", "alpha", "alphaMode",
+                                    "alphaCutoff"}
     assert documented_params == {p.key for p in L.MATERIAL_PARAMS}
     # the loader validates with the same table
     assert PRINCIPLED_NUMBERS == {p.key: (p.default, p.lo, p.hi) for p in L.MATERIAL_PARAMS

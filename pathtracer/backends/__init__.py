@@ -6,6 +6,9 @@ protocol of :class:`.base.Backend`.
 """
 
 
+import importlib.util
+
+
 def cuda_available(simulator=False):
     """Is a CUDA GPU usable? Numba's CUDA simulator (NUMBA_ENABLE_CUDASIM=1) counts only
     with ``simulator``: ``auto`` never picks it, ``--backend cuda`` may use it."""
@@ -28,6 +31,9 @@ def make_backend(name, scene, **options):
         return CPUBackend(scene, **options)
     if name == "cuda":
         if not cuda_available(simulator=True):
+            if importlib.util.find_spec("numba_cuda") is None:
+                raise RuntimeError("--backend cuda needs numba-cuda: pip install "
+                                   "'pt-render[cuda]'")
             raise RuntimeError("--backend cuda: no CUDA GPU is available (numba.cuda finds none)")
         from .cuda import CUDABackend
         return CUDABackend(scene, **options)
