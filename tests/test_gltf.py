@@ -678,3 +678,41 @@ def test_specular_glossiness_converts_to_metallic_roughness(tmp_path):
     assert gold["metallic"] > 0.99 and np.allclose(gold["albedo"], [1.0, 0.78, 0.34],
                                                    atol=0.01)
     assert gold["roughness"] == pytest.approx(0.1)
+
+
+def test_texture_transform_rotation_moves_the_texture_coordinates(tmp_path):
+    """KHR_texture_transform with a rotation (TextureTransformTest's rotated arrows): the
+    same transform on every texture of a material is applied to the material's texture
+    coordinates (translation x rotation x scale, as the extension defines it), so a
+    lookup reads where glTF reads; transforms that differ between a material's textures
+    keep their offset and scale and name the rotation in a warning."""
+    import math
+    b = Builder()
+    t = b.image(png(np.full((2, 2, 3), 200)))
+    xf = {"offset": [0.25, 0.1], "rotation": 0.5, "scale": [2, 3]}
+    mi = b.material({"pbrMetallicRoughness": {
+        "baseColorTexture": {"index": t, "extensions": {"KHR_texture_transform": xf}},
+        "metallicRoughnessTexture": {"index": t, "extensions": {"KHR_texture_transform": xf}}}})
+    b.used.add("KHR_texture_transform")
+    b.node(mesh=b.mesh(QUAD_V, QUAD_F, uvs=QUAD_UV, material=mi))
+    m = read_model(b.save(tmp_path / "r.glb"))
+    assert not any("rotation" in w for w in m.warnings), m.warnings
+    assert "tile" not in m.materials[0]["albedo"] and "offset" not in m.materials[0]["albedo"]
+    c, s = math.cos(0.5), math.sin(0.5)
+    for face, tri in zip(QUAD_F, m.uvs):
+        for k, vertex in enumerate(face):
+            u, v = QUAD_UV[vertex]                  # glTF coordinates
+            gu = c * 2 * u + s * 3 * v + 0.25       # the extension's matrix
+            gv = -s * 2 * u + c * 3 * v + 0.1
+            assert tri[k] == pytest.approx([gu, 1 - gv]), (u, v)      # ours: v flipped
+    # different transforms on one material: offset and scale kept, the rotation warned
+    b = Builder()
+    t = b.image(png(np.full((2, 2, 3), 200)))
+    mi = b.material({"pbrMetallicRoughness": {
+        "baseColorTexture": {"index": t, "extensions": {"KHR_texture_transform": xf}},
+        "metallicRoughnessTexture": {"index": t}}})
+    b.used.add("KHR_texture_transform")
+    b.node(mesh=b.mesh(QUAD_V, QUAD_F, uvs=QUAD_UV, material=mi))
+    m = read_model(b.save(tmp_path / "d.glb"))
+    assert any("rotations that differ" in w for w in m.warnings)
+    assert m.materials[0]["albedo"]["tile"] == [2, 3]

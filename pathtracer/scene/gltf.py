@@ -36,6 +36,29 @@ import numpy as np
 from .errors import SceneError
 from .mesh_data import ObjMesh
 
+def _uv_transform(ext):
+    """KHR_texture_transform's matrix (2 x 3, glTF's texture coordinates): translation x
+    rotation x scale, as its specification defines it."""
+    su, sv = (float(x) for x in ext.get("scale", [1, 1]))
+    ou, ov = (float(x) for x in ext.get("offset", [0, 0]))
+    r = float(ext.get("rotation", 0.0))
+    c, s = math.cos(r), math.sin(r)
+    return np.array([[c * su, s * sv, ou], [-s * su, c * sv, ov]])
+
+
+def _texture_specs(value):
+    """The texture specs (dicts with a "texture") anywhere in a material dict."""
+    if isinstance(value, dict):
+        if "texture" in value:
+            yield value
+        else:
+            for v in value.values():
+                yield from _texture_specs(v)
+    elif isinstance(value, list):
+        for v in value:
+            yield from _texture_specs(v)
+
+
 # componentType -> numpy type
 COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16,
               5125: np.uint32, 5126: np.float32}
@@ -352,7 +375,7 @@ class GltfModel:
             tri = _triangles(idx, mode)
             if not len(tri):
                 continue
-            mat, texcoord = self._material(prim.material, pw)
+            mat, texcoord, uv_matrix = self._material(prim.material, pw)
             nrm = None
             if getattr(attrs, "NORMAL", None) is not None:
                 nrm = self.accessor(attrs.NORMAL, pw).astype(np.float64)[:, :3]
@@ -361,6 +384,8 @@ class GltfModel:
             acc = getattr(attrs, name, None)
             if acc is not None:
                 uv = self.accessor(acc, pw).astype(np.float64)[:, :2].copy()
+                if uv_matrix is not None:               # a rotated KHR_texture_transform
+                    uv = uv @ uv_matrix[:, :2].T + uv_matrix[:, 2]
                 uv[:, 1] = 1.0 - uv[:, 1]               # glTF: v = 0 at the image's top
             elif texcoord:
                 self.warn(f"{pw}: its material's textures use {name}, which it lacks")
@@ -463,7 +488,7 @@ class GltfModel:
             self._specular_glossiness(ext["KHR_materials_pbrSpecularGlossiness"], out, mw, sets)
         if "KHR_materials_unlit" in ext:
             out = self._unlit(out, m, mw)
-            got = (self._add(out), sets[0] if sets else 0)
+            got = (self._add(out), sets[0][0] if sets else 0, None)
             self._materials[index] = got
             return got
         self._extensions(ext, out, mw, sets)
@@ -476,13 +501,33 @@ class GltfModel:
             out = {k: v for k, v in out.items() if k in ("name", "_pointer", "albedo",
                                                          "emission", "twoSided")}
             out["type"] = "diffuse"
-        texcoord = sets[0] if sets else 0
-        if len(set(sets)) > 1:
+        texcoord = sets[0][0] if sets else 0
+        if len({s[0] for s in sets}) > 1:
             self.warn(f"{mw}: textures on several texture coordinate sets; all read with "
                       f"TEXCOORD_{texcoord}")
-        got = (self._add(out), texcoord)
+        uv_matrix = self._rotated_transform(out, sets, mw)
+        got = (self._add(out), texcoord, uv_matrix)
         self._materials[index] = got
         return got
+
+    def _rotated_transform(self, out, sets, mw):
+        """A KHR_texture_transform with a rotation, which a texture's tile and offset cannot
+        express: where every texture of the material has the same transform, it is applied
+        to the material's texture coordinates (returned: glTF's 2 x 3 matrix, for the
+        primitive's UVs) and the textures read them as they are; else the rotation is
+        ignored with a warning (their tile and offset kept)."""
+        rotated = [m for _, m in sets if m is not None and m[0, 1] != 0.0]
+        if not rotated:
+            return None
+        if len(rotated) != len(sets) or any(not np.array_equal(m, rotated[0])
+                                            for m in rotated):
+            self.warn(f"{mw}: KHR_texture_transform rotations that differ between the "
+                      "material's textures are not supported (ignored)")
+            return None
+        for spec in _texture_specs(out):
+            spec.pop("tile", None)
+            spec.pop("offset", None)
+        return rotated[0]
 
     def _unlit(self, out, m, mw):
         """KHR_materials_unlit: the surface shows its base colour whatever the lighting. A
@@ -613,7 +658,7 @@ class GltfModel:
         self._where = where
         ext = (getattr(info, "extensions", None) or {}).get("KHR_texture_transform") or {}
         texcoord = ext.get("texCoord", info.texCoord or 0)
-        sets.append(int(texcoord))
+        sets.append((int(texcoord), _uv_transform(ext) if ext else None))
         spec = {"texture": self._image(tex, f"/textures/{index}"), "colorSpace": color_space}
         if channel:
             spec["channel"] = channel
@@ -640,9 +685,8 @@ class GltfModel:
         if ext:
             su, sv = (float(x) for x in ext.get("scale", [1, 1]))
             ou, ov = (float(x) for x in ext.get("offset", [0, 0]))
-            if float(ext.get("rotation", 0.0)) != 0.0:
-                self.warn(f"{where}: KHR_texture_transform rotation not supported (ignored)")
-            # v flipped (ours = 1 - glTF's): v' = sv v + (1 - sv - ov) in our coordinates
+            # (a rotation: the material's texture coordinates are transformed instead, see
+            # _rotated_transform) v flipped (ours = 1 - glTF's): v' = sv v + (1 - sv - ov) in our coordinates
             spec["tile"] = [su, sv]
             spec["offset"] = [ou, 1.0 - sv - ov]
         return spec
