@@ -13,6 +13,7 @@ import re
 import signal
 import sys
 import tempfile
+import threading
 import time
 import traceback
 
@@ -24,6 +25,8 @@ from .scene import SceneError
 from .scene.loader import LIGHT_SAMPLERS, SAMPLERS, TONEMAPS
 
 PREVIEW_PORT = 8765
+# a compile that takes longer than this is announced (a cached one takes well under it)
+COMPILE_NOTICE_SECONDS = 1.0
 STOP_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP")
                      if hasattr(signal, n))
 
@@ -661,15 +664,26 @@ def _render(args, scene_path, signals):
     from .progress import Progress
     compile_seconds = [0.0]
 
+    # "compiling kernels" only when it takes a while: a run whose kernels come from the
+    # disk cache is ready in well under a second and says nothing about compiling
+    compile_notice = []
+
     def on_stage(stage, seconds):
         if stage == "compiling" and not args.quiet:
-            print("pt-render: compiling kernels (cached on disk after the first run)...",
-                  file=log)
+            notice = threading.Timer(COMPILE_NOTICE_SECONDS, lambda: print(
+                "pt-render: compiling kernels for this scene's features (the first time "
+                "only: cached on disk)...", file=log, flush=True))
+            notice.daemon = True
+            notice.start()
+            compile_notice.append(notice)
         signals.check()
         if stage == "compiled":
             compile_seconds[0] = seconds
-            if not args.quiet:
+            for notice in compile_notice:
+                notice.cancel()
+            if not args.quiet and seconds >= COMPILE_NOTICE_SECONDS:
                 print(f"pt-render: kernels ready in {seconds:.2f} s", file=log)
+            progress.start_sampling()
         if stage == "aovs" and not args.quiet:
             from .denoise import AOV_SPP
             print(f"pt-render: albedo and normal images ({AOV_SPP} spp) in {seconds:.2f} s",
@@ -773,7 +787,10 @@ def _render(args, scene_path, signals):
                               f"({e.strerror or e}); the image was written") from None
         print(f"pt-render: relMSE table written to {csv_path}", file=log)
     stats = result.stats
-    print(f"pt-render: {film.spp} spp in {result.seconds:.2f} s (compile "
+    # (adaptive: pixels stop at different counts; film.spp is the most any took)
+    spp_text = (f"{film.count.mean():.1f} spp on average (at most {film.spp})"
+                if args.adaptive else f"{film.spp} spp")
+    print(f"pt-render: {spp_text} in {result.seconds:.2f} s (compile "
           f"{compile_seconds[0]:.2f} s): {stats['paths_per_second'] / 1e6:.3f} M camera "
           f"paths/s, {stats['rays_per_second'] / 1e6:.3f} M rays/s; wrote "
           f"{' and '.join(written)}", file=log)

@@ -21,6 +21,15 @@ class Progress:
                                        "[{elapsed}<{remaining}{postfix}]")
         self.by_time = spp is None
 
+    def start_sampling(self):
+        """Start the bar's clock now (the kernels are ready): its rate and ETA count
+        sampling time only, not the compile before it."""
+        if self.bar is not None:
+            now = self.bar._time()
+            self.bar.start_t = self.bar.last_print_t = now
+            self.bar.last_print_n = self.bar.n
+            self.bar.refresh()
+
     def update(self, spp, elapsed):
         if self.bar is None:
             return

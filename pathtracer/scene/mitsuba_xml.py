@@ -796,8 +796,8 @@ def _bsdf_kind(r, el, name):
                    "lobe (Burley's, a little darker than Lambert's at grazing angles)", el)
         return mat
     raise r.error(f"BSDF {kind!r} is not supported: diffuse, principled, dielectric, "
-                  "roughdielectric, thindielectric, conductor, roughconductor, plastic, "
-                  "roughplastic, twosided", el)
+                  "roughdielectric, conductor, roughconductor, plastic, roughplastic, "
+                  "normalmap, mask, twosided", el)
 
 
 def _fresnel_dielectric(cos_i, eta):
