@@ -1,5 +1,5 @@
 """BVH build time (issue: CPU speed): the builder against its plain formulation
-(``build_bvh(..., _plain=True)``: one thread, node bounds recomputed per node, triangles
+(``build_bvh(..., _plain=tests.bvh_oracle.build_plain)``: one thread, node bounds recomputed per node, triangles
 read through the order array) on one mesh file, in one run: median of 3 builds after a
 warm-up, with the SAH cost and node count (equal trees: the two make the same tree).
 
@@ -27,7 +27,8 @@ def main(argv=None):
     rec = {"command": command(), "machine": machine(), "date": now(), "versions": versions(),
            "mesh": os.path.basename(a.mesh), "triangles": int(len(pos))}
     trees = {}
-    for name, plain in (("plain", True), ("builder", False)):
+    from tests.bvh_oracle import build_plain
+    for name, plain in (("plain", build_plain), ("builder", None)):
         build_bvh(pos[:1000], _plain=plain)          # compile (or load) outside the timing
         build_bvh(pos, _plain=plain)                 # warm-up
         times = []

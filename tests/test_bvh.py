@@ -17,6 +17,7 @@ from pathtracer.kernels.wide import (PACKET, any_hit_wide, closest_hit_packet,
 from pathtracer.accel.wide import WIDE_STACK_SIZE, WIDE_TRAVERSAL_WORDS, widen_bvh
 from pathtracer.scene.meshes import load_obj
 from tests.conftest import SHARED, needs_shared
+from tests.bvh_oracle import build_plain
 
 
 def tri_rows(pos):
@@ -357,7 +358,7 @@ def test_fast_builder_makes_the_plain_builders_tree(rng, split):
     plane[:, :, 2] = 0.5
     meshes += [plane, np.zeros((40, 3, 3), np.float32)]
     for pos in meshes:
-        plain = build_bvh(pos, split=split, _plain=True)
+        plain = build_bvh(pos, split=split, _plain=build_plain)
         # the thread count sets how much of the top is built before the parallel subtrees
         for threads in ((None, 1, 7, 64) if len(pos) >= PARALLEL_MIN else (None,)):
             fast = build_bvh(pos, split=split, _threads=threads)
@@ -371,7 +372,7 @@ def test_fast_builder_makes_the_plain_builders_tree_for_any_bin_count(rng, n_bin
     """The builder's filled bins are bits of an int64: up to 64 bins, the plain tree; more
     are refused."""
     pos = (rng.random((4000, 1, 3)) + rng.normal(0, 0.02, (4000, 3, 3))).astype(np.float32)
-    plain = build_bvh(pos, n_bins=n_bins, _plain=True)
+    plain = build_bvh(pos, n_bins=n_bins, _plain=build_plain)
     fast = build_bvh(pos, n_bins=n_bins)
     for a, b in zip(fast[:3], plain[:3]):
         assert np.array_equal(a, b)
