@@ -716,3 +716,35 @@ def test_texture_transform_rotation_moves_the_texture_coordinates(tmp_path):
     m = read_model(b.save(tmp_path / "d.glb"))
     assert any("rotations that differ" in w for w in m.warnings)
     assert m.materials[0]["albedo"]["tile"] == [2, 3]
+
+
+def test_clearcoat_and_specular_factor_textures_are_read(tmp_path):
+    """KHR_materials_clearcoat's clearcoatTexture (red channel) and KHR_materials_specular's
+    specularTexture (alpha channel) multiply their factors: the principled parameters'
+    textures (linear), the factor as the texture's scale; the textures the principled BSDF
+    cannot express are named in warnings."""
+    b = Builder()
+    t = b.image(png(np.full((2, 2, 3), 200)))
+    mi = b.material({"pbrMetallicRoughness": {"metallicFactor": 0},
+                     "extensions": {
+                         "KHR_materials_clearcoat": {"clearcoatFactor": 0.5,
+                                                     "clearcoatTexture": {"index": t},
+                                                     "clearcoatRoughnessTexture": {"index": t}},
+                         "KHR_materials_specular": {"specularFactor": 0.5,
+                                                    "specularTexture": {"index": t},
+                                                    "specularColorTexture": {"index": t}}}})
+    b.used.update({"KHR_materials_clearcoat", "KHR_materials_specular"})
+    b.node(mesh=b.mesh(QUAD_V, QUAD_F, uvs=QUAD_UV, material=mi))
+    m = read_model(b.save(tmp_path / "c.glb"))
+    mm = m.materials[0]
+    assert mm["clearcoat"]["channel"] == "r" and mm["clearcoat"]["scale"] == 0.5
+    assert mm["specular"]["channel"] == "a" and mm["specular"]["scale"] == pytest.approx(0.25)
+    assert mm["clearcoat"]["colorSpace"] == "linear" == mm["specular"]["colorSpace"]
+    text = " | ".join(m.warnings)
+    assert "clearcoatRoughnessTexture" in text and "specularColorTexture" in text
+    assert "clearcoatTexture is" not in text and "specularTexture is" not in text
+    # and it loads and renders as a scene (the textures compiled into the principled slots)
+    scene = pt.load_scene(str(tmp_path / "c.glb"))
+    from pathtracer.kernels.layout import T_CLEARCOAT, T_SPECULAR
+    tex = scene.compiled.arrays.mat_tex
+    assert (tex[:, T_CLEARCOAT] >= 0).any() and (tex[:, T_SPECULAR] >= 0).any()

@@ -431,14 +431,16 @@ class GltfModel:
 
     # -- materials
     def _material(self, index, where):
-        """(our material index, the texture coordinate set its textures use)."""
+        """(our material index, the texture coordinate set its textures use, the 2 x 3
+        matrix of a rotated texture transform to apply to those coordinates or None)."""
         if index in self._materials:
             return self._materials[index]
         g = self.gltf
         if index is None:
             # the glTF default material: base colour 1, metallic 1, roughness 1
             got = (self._add({"name": "gltf-default", "albedo": 1.0, "metallic": 1.0,
-                              "roughness": 1.0, "_pointer": "(the default material)"}), 0)
+                              "roughness": 1.0, "_pointer": "(the default material)"}), 0,
+                   None)
             self._materials[index] = got
             return got
         if not 0 <= index < len(g.materials):
@@ -605,8 +607,14 @@ class GltfModel:
             else:
                 # F0 = ((1.5 - 1) / (1.5 + 1))^2 * colour * factor = 0.08 * specular
                 out["specular"] = min(1.0, 0.5 * factor * float(np.mean(color)))
-            if spec.get("specularTexture") or spec.get("specularColorTexture"):
-                self.warn(f"{mw}: KHR_materials_specular textures are not read")
+                if spec.get("specularTexture") is not None:
+                    # the factor's texture: its alpha channel (linear)
+                    out["specular"] = self._texture(
+                        _info(spec["specularTexture"]), "linear", out["specular"], "a",
+                        mw + "/extensions/KHR_materials_specular/specularTexture", sets)
+            if spec.get("specularColorTexture") is not None:
+                self.warn(f"{mw}: KHR_materials_specular specularColorTexture is not read "
+                          "(the colour factor's mean is)")
         cc = ext.get("KHR_materials_clearcoat")
         if cc:
             out["clearcoat"] = min(1.0, float(cc.get("clearcoatFactor", 0.0)))
@@ -614,9 +622,14 @@ class GltfModel:
             # the principled coat's alpha runs 0.1 (gloss 0) to 0.001 (gloss 1); glTF's
             # coat alpha is roughness^2
             out["clearcoatGloss"] = min(1.0, max(0.0, (0.1 - r * r) / 0.099))
-            if any(cc.get(k) for k in ("clearcoatTexture", "clearcoatRoughnessTexture",
-                                       "clearcoatNormalTexture")):
-                self.warn(f"{mw}: KHR_materials_clearcoat textures are not read")
+            if cc.get("clearcoatTexture") is not None:
+                # the factor's texture: its red channel
+                out["clearcoat"] = self._texture(
+                    _info(cc["clearcoatTexture"]), "linear", out["clearcoat"], "r",
+                    mw + "/extensions/KHR_materials_clearcoat/clearcoatTexture", sets)
+            for k in ("clearcoatRoughnessTexture", "clearcoatNormalTexture"):
+                if cc.get(k) is not None:
+                    self.warn(f"{mw}: KHR_materials_clearcoat {k} is not read")
         sh = ext.get("KHR_materials_sheen")
         if sh:
             color = [float(c) for c in sh.get("sheenColorFactor", [0, 0, 0])]
