@@ -285,9 +285,17 @@ def read_raw(path):
         import OpenEXR
         with OpenEXR.File(path) as f:
             ch = f.channels()
-            img = ch["RGB"].pixels if "RGB" in ch else np.stack(
-                [ch[c].pixels for c in "RGB"], axis=-1)
-        return img, True
+            # OpenEXR's reader merges R, G, B (and A) into one "RGB" or "RGBA" entry; a file
+            # with other layers keeps them apart; a grey one is "Y"
+            for merged in ("RGBA", "RGB"):
+                if merged in ch:
+                    return ch[merged].pixels, True
+            names = [c for c in "RGBA" if c in ch]
+            if names[:3] == ["R", "G", "B"]:
+                return np.stack([ch[c].pixels for c in names], axis=-1), True
+            if "Y" in ch:
+                return ch["Y"].pixels[..., None], True
+            raise ValueError(f"no RGB, RGBA or Y channels (it has {', '.join(sorted(ch))})")
     import imageio.v3 as iio
     raw = iio.imread(path)
     return raw, raw.dtype.kind == "f"

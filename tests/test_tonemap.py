@@ -107,3 +107,28 @@ def test_scene_keys_and_errors(tmp_path):
     r = pt_render(write_scene(tmp_path, furnace_scene(0.5, 0.5, 2), "d.json"), "--tonemap",
                   "filmic", "--backend", "cpu")
     assert r.returncode == 2 and "tonemap" in r.stderr
+
+
+def test_exr_files_with_alpha_or_one_channel_are_read(tmp_path):
+    """The one image reader takes EXR files as other tools write them: RGBA (Blender's
+    renders; OpenEXR's reader merges the channels into one "RGBA" entry), RGB, separate
+    R, G, B channels beside other layers, and grey (Y); as a texture, an RGBA file's alpha
+    is its fourth channel."""
+    import OpenEXR
+
+    from pathtracer.film import read_image, read_raw
+    rgba = np.random.default_rng(0).random((4, 5, 4)).astype(np.float32)
+    c = np.ascontiguousarray           # (OpenEXR's writer takes contiguous arrays)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    cases = {"rgba.exr": ({"RGBA": rgba}, rgba),
+             "rgb.exr": ({"RGB": c(rgba[..., :3])}, rgba[..., :3]),
+             "layers.exr": ({"R": c(rgba[..., 0]), "G": c(rgba[..., 1]), "B": c(rgba[..., 2]),
+                             "depth.Z": c(rgba[..., 3])}, rgba[..., :3]),
+             "grey.exr": ({"Y": c(rgba[..., 0])}, rgba[..., :1])}
+    for name, (channels, expect) in cases.items():
+        path = str(tmp_path / name)
+        OpenEXR.File(header, channels).write(path)
+        got, is_float = read_raw(path)
+        assert is_float and np.array_equal(got, expect), name
+        if expect.shape[-1] >= 3:
+            assert np.array_equal(read_image(path), expect[..., :3]), name
