@@ -71,8 +71,10 @@ for name in CONVERGENCE:
     out[name] = megakernel(s)
     if name in ("bunny-studio", "sun", "textured"):
         out[name + " wavefront"] = wavefront(s)
+HAS_CONDUCTOR = "conductor" in Features._fields
 for alpha in ((False, True) if "alpha" in Features._fields else (False,)):
-    s = _full_feature_scene(pathlib.Path(tempfile.mkdtemp()), alpha=alpha)
+    s = _full_feature_scene(pathlib.Path(tempfile.mkdtemp()), alpha=alpha,
+                            conductor=HAS_CONDUCTOR)
     out[f"every feature{' + alpha' if alpha else ''}"] = megakernel(s)
     if not alpha:
         out["every feature wavefront"] = wavefront(s)

@@ -18,6 +18,9 @@ MAX_RADIANCE = 1e16
 # Reflectance-like colours (albedo and texture scales other than emission): up to 1 is
 # physical; larger values are allowed (artistic gain) up to this bound.
 MAX_REFLECTANCE = 1e3
+# A conductor's complex index of refraction (eta, k per channel): measured metals stay
+# below ~20; the bound keeps the Fresnel terms' squares and products finite in float32.
+MAX_IOR = 1e4
 MAX_SEED = 2 ** 32 - 1            # the RNG hashes 32-bit seeds, pixels and sample indices
 MAX_SPP = 2 ** 31 - 1             # sample indices of one render stay below 2^31
 MAX_BOUNCES = 1000

@@ -30,6 +30,13 @@ def mitsuba_bsdf(material):
     """Mitsuba BSDF of a material given in the scene format's names (a dict)."""
     if material.get("type") == "diffuse":
         return {"type": "diffuse", "reflectance": _rgb(material["albedo"])}
+    if material.get("type") == "conductor":
+        au = material.get("alphaU", 0.0)
+        return {"type": "roughconductor", "distribution": material.get("distribution", "ggx"),
+                "alpha_u": au, "alpha_v": material.get("alphaV", au),
+                "eta": _rgb(material.get("eta", [0.0] * 3)),
+                "k": _rgb(material.get("k", [1.0] * 3)),
+                "specular_reflectance": _rgb(material.get("albedo", [1.0] * 3))}
     if material.get("roughness") == 0.0 and material.get("transmission") == 1.0:
         return {"type": "dielectric", "int_ior": material["eta"], "ext_ior": 1.0}
     out = {"type": "principled"}

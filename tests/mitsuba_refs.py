@@ -111,6 +111,14 @@ CASES = {
     # smooth glass against Mitsuba's dielectric
     "glass_smooth_vs_dielectric": {"albedo": [1, 1, 1], "transmission": 1.0,
                                    "roughness": 0.0, "eta": 1.5},
+    # conductors: Mitsuba's gold (its RGB eta and k) on GGX, and copper's on anisotropic
+    # Beckmann with a tint
+    "conductor_gold_ggx": {"type": "conductor", "eta": [0.1431, 0.3749, 1.4425],
+                           "k": [3.9831, 2.3857, 1.6032], "alphaU": 0.15},
+    "conductor_copper_beckmann_aniso": {"type": "conductor", "eta": [0.2004, 0.9240, 1.1022],
+                                        "k": [3.9129, 2.4528, 2.1421], "alphaU": 0.3,
+                                        "alphaV": 0.06, "distribution": "beckmann",
+                                        "albedo": [0.9, 0.85, 0.8]},
 }
 
 
@@ -183,11 +191,22 @@ def main():
     sphere_obj()
     gradient_sky()
     spp = int(sys.argv[1]) if len(sys.argv) > 1 else 16384
+    # cases named after the spp: only those are rendered (the others' images are kept)
+    only = sys.argv[2:] or list(CASES)
     meta = {"hdri": HDRI, "resolution": RES, "spp": spp, "max_bounces": MAX_BOUNCES,
             "date": datetime.date.today().isoformat(), "machine": platform.processor() or
             platform.machine(), "command": "python -m tests.mitsuba_refs " + str(spp),
             "cases": CASES}
-    for name, material in CASES.items():
+    old_path = os.path.join(REF_DIR, "references.json")
+    if sys.argv[2:] and os.path.isfile(old_path):
+        old = json.load(open(old_path))
+        if old["spp"] != spp:
+            raise SystemExit(f"the kept references have {old['spp']} spp: render with that")
+        meta["dates"] = {**old.get("dates", {n: old["date"] for n in old["cases"]}),
+                         **{n: meta["date"] for n in only}}
+        meta["date"] = old["date"]
+    for name in only:
+        material = CASES[name]
         img, version = render_mitsuba(material, env_for(name, shared), spp)
         meta["mitsuba"] = version
         np.save(os.path.join(REF_DIR, name + ".npy"), img)

@@ -55,10 +55,11 @@ def test_no_float64_in_ptx():
     assert not f64, f64[:10]
 
 
-def _full_feature_scene(tmp_path, alpha=True):
+def _full_feature_scene(tmp_path, alpha=True, conductor=True):
     """Every kernel feature at once: principled materials with textures (mirrored and
     clamped) and a normal map, emissive triangles, a point light, a tilted HDRI, smooth
-    normals, a thin lens, vertex colours, hidden emitters and (``alpha``) a glTF quad with
+    normals, a thin lens, vertex colours, hidden emitters, (``conductor``) an anisotropic
+    Beckmann conductor and (``alpha``) a glTF quad with
     alphaMode BLEND (the wavefront renders every feature but alpha)."""
     import imageio.v3 as iio
 
@@ -92,13 +93,19 @@ def _full_feature_scene(tmp_path, alpha=True):
              "specularTint": 0.5, "subsurface": 0.3},
             {"name": "glass", "transmission": 1, "roughness": 0.1, "eta": 1.5,
              "clearcoat": 0.5, "sheen": 0.3},
-            {"name": "lamp", "type": "diffuse", "albedo": 0, "emission": 4, "oneSided": True}],
+            {"name": "lamp", "type": "diffuse", "albedo": 0, "emission": 4, "oneSided": True}
+        ] + ([{"name": "gold", "type": "conductor", "eta": [0.143, 0.375, 1.442],
+               "k": [3.983, 2.386, 1.603], "alphaU": 0.3, "alphaV": 0.1,
+               "distribution": "beckmann"}] if conductor else []),
         "objects": [
             {"name": "floor", "file": "quad.obj", "material": "floor"},
             {"name": "ball", "vertices": v, "faces": f, "material": "glass", "smooth": True},
             {"name": "lamp", "vertices": v, "faces": f, "material": "lamp",
              "transform": {"translate": [2, 2, 0], "scale": 0.3}},
-            {"name": "coloured", "file": "vc.glb"}],
+            {"name": "coloured", "file": "vc.glb"},
+            {"name": "metal", "vertices": v, "faces": f,
+             "material": "gold" if conductor else "glass", "smooth": True,
+             "transform": {"translate": [-2, 0.5, -1], "scale": 0.4}}],
         "lights": [{"position": [-2, 3, 1], "intensity": 5}],
         "environment": {"file": "sky.npy",
                         "matrix": [[1, 0, 0], [0, c, -s_], [0, s_, c]]},     # tilted about X
@@ -107,7 +114,8 @@ def _full_feature_scene(tmp_path, alpha=True):
     s = load_scene(write_scene(tmp_path, scene))
     # every flag but the constant-colour environment (the HDRI replaces it)
     assert all(v for k, v in s.features._asdict().items()
-               if k not in ("environment", "alpha")), s.features
+               if k not in ("environment", "alpha", "conductor")), s.features
+    assert getattr(s.features, "conductor", False) == conductor
     assert getattr(s.features, "alpha", False) == alpha
     return s
 

@@ -9,7 +9,7 @@ import pytest
 
 import pathtracer as pt
 from pathtracer.film import relmse
-from pathtracer.scene.mitsuba_xml import convert_file
+from pathtracer.scene.mitsuba_xml import conductor_table, convert_file
 from tests.conftest import ROOT, needs_shared
 
 XML_CORNELL = os.path.join(ROOT, "scenes", "cornell-box-mitsuba.xml")
@@ -103,7 +103,8 @@ def test_defaults_refs_materials_and_emitters(tmp_path):
     glass = mats[d["objects"][2]["material"]]
     assert glass["transmission"] == 1 and glass["eta"] == pytest.approx(1.5046 / 1.000277)
     mirror = mats[d["objects"][3]["material"]]
-    assert mirror["metallic"] == 1 and mirror["roughness"] == pytest.approx(0.2)
+    assert mirror["type"] == "conductor" and mirror["alphaU"] == pytest.approx(0.04)
+    assert mirror["k"] == [1.0] * 3 and mirror["distribution"] == "beckmann"
     assert d["render"] == {"maxBounces": 4, "rrDepth": 3}
     card = np.array(d["objects"][1]["transform"]["matrix"])
     assert np.allclose(card[:3, :3], 2 * np.eye(3)) and np.allclose(card[:3, 3], [0, -1, 0])
@@ -534,21 +535,47 @@ def test_normalmap_bsdf_gives_its_nested_material_a_normal_map(tmp_path):
       <string name="distribution" value="ggx"/></bsdf></bsdf></shape>"""
     d, warnings = convert_file(write(tmp_path, body))
     m = d["materials"][0]
-    assert m["metallic"] == 1 and m["roughness"] == pytest.approx(0.2)
+    assert m["type"] == "conductor" and m["alphaU"] == pytest.approx(0.04)
     assert m["normalMap"]["texture"].endswith("n.png")
     assert m["normalMap"]["colorSpace"] == "linear" and m["oneSided"]
 
 
-def test_anisotropic_roughconductor_maps_to_principled_anisotropy(tmp_path):
-    """alpha_u, alpha_v -> roughness^2 = sqrt(au av) and anisotropic with sqrt(1 - 0.9 a) =
-    sqrt(av / au): the principled lobe's alphas are then exactly au and av."""
+def test_conductors_are_read_exactly(tmp_path):
+    """conductor / roughconductor -> the conductor material: Mitsuba's named metals as
+    eta and k over ext_eta, alpha_u / alpha_v as they are (alpha_v > alpha_u too), its
+    default distribution (Beckmann), textured alphas, material 'none' a perfect mirror."""
     body = SENSOR + """<shape type="cube"><bsdf type="roughconductor">
-      <float name="alpha_u" value="0.2"/><float name="alpha_v" value="0.05"/>
-      <string name="distribution" value="ggx"/></bsdf></shape>"""
-    m = convert_file(write(tmp_path, body))[0]["materials"][0]
-    r2 = m["roughness"] ** 2
-    aspect = math.sqrt(1 - 0.9 * m["anisotropic"])
-    assert r2 / aspect == pytest.approx(0.2) and r2 * aspect == pytest.approx(0.05)
+      <float name="alpha_u" value="0.05"/><float name="alpha_v" value="0.3"/>
+      <string name="material" value="Au"/><float name="ext_eta" value="1.5"/>
+      <rgb name="specular_reflectance" value="0.9 0.8 0.7"/></bsdf></shape>
+      <shape type="cube"><bsdf type="conductor"/></shape>
+      <shape type="rectangle"><bsdf type="roughconductor"><string name="distribution" value="ggx"/>
+      <texture type="checkerboard" name="alpha"><float name="color0" value="0.1"/>
+      <float name="color1" value="0.4"/></texture></bsdf></shape>"""
+    d, warnings = convert_file(write(tmp_path, body))
+    aniso, mirror, textured = d["materials"]
+    eta, k = conductor_table()["Au"]
+    assert aniso["type"] == "conductor" and aniso["distribution"] == "beckmann"
+    assert (aniso["alphaU"], aniso["alphaV"]) == (0.05, 0.3)
+    assert np.allclose(aniso["eta"], eta / 1.5) and np.allclose(aniso["k"], k / 1.5)
+    assert aniso["albedo"] == [0.9, 0.8, 0.7] and aniso["oneSided"]
+    assert mirror["eta"] == [0.0] * 3 and mirror["k"] == [1.0] * 3 and "alphaU" not in mirror
+    assert textured["distribution"] == "ggx" and textured["alphaU"]["colorSpace"] == "linear"
+    assert not any("approximated" in w or "Schlick" in w for w in warnings)
+    scene = pt.load_scene(write(tmp_path, body))
+    assert scene.features.conductor
+
+
+def test_null_bsdf_lets_rays_through(tmp_path):
+    """null: a surface every ray passes (a cut-out everywhere); with an area emitter on it
+    (light that rays pass through) an error."""
+    body = SENSOR + '<shape type="cube"><bsdf type="null"/></shape>'
+    (m,) = convert_file(write(tmp_path, body))[0]["materials"]
+    assert m["alpha"] == 0.0 and m["alphaMode"] == "mask" and not m.get("oneSided")
+    lit = SENSOR + ('<shape type="cube"><bsdf type="null"/><emitter type="area">'
+                    '<rgb name="radiance" value="1"/></emitter></shape>')
+    with pytest.raises(pt.SceneError, match="null BSDF"):
+        convert_file(write(tmp_path, lit))
 
 
 def test_mask_bsdf_is_stochastic_transparency(tmp_path):

@@ -48,7 +48,7 @@ from .launch import Launcher
 from ..kernels.constants import STACK_SIZE
 from ..kernels.integrator import make_wavefront
 from ..kernels.rng import udiv32
-from ..kernels.layout import (HIT_F_WIDTH, M_TYPE, MAT_PRINCIPLED, PATH_F_WIDTH,
+from ..kernels.layout import (HIT_F_WIDTH, M_TYPE, MAT_DIFFUSE, PATH_F_WIDTH,
                               PATH_I_WIDTH)
 
 # Paths a launch holds state for: 2^23 paths are ~0.8 GB of path state, hits and queues; a
@@ -174,7 +174,7 @@ def wavefront_kernels(features, max_registers=None, fast=False, sort_hits=False)
                 t, tri, b1, b2 = wave_trace(path, scene, paths_f, paths_i, stack)
             b_side = False
             if SORT and valid and tri >= 0:
-                b_side = scene.mat[scene.tri_mat[tri], M_TYPE] == MAT_PRINCIPLED
+                b_side = scene.mat[scene.tri_mat[tri], M_TYPE] != MAT_DIFFUSE
             hit_slot = push(hit_queue, counts, HITS + LEVEL * level, path,
                             valid and tri >= 0 and not b_side, False)
             if SORT:

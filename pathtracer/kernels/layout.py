@@ -64,7 +64,7 @@ TRI_COL_WIDTH = 9
 M_ALBEDO = 0          # rgb; for a textured albedo the texture's scale
 M_EMISSION = 3        # rgb; non-zero means "emits" (a textured emission keeps its scale here)
 M_TWO_SIDED = 6       # 1: emits on both sides
-M_TYPE = 7            # MAT_DIFFUSE or MAT_PRINCIPLED
+M_TYPE = 7            # MAT_DIFFUSE, MAT_PRINCIPLED or MAT_CONDUCTOR
 M_ROUGHNESS = 8
 M_METALLIC = 9
 M_SPECULAR = 10
@@ -92,6 +92,20 @@ ALPHA_BLEND = 2
 
 MAT_DIFFUSE = 0
 MAT_PRINCIPLED = 1
+MAT_CONDUCTOR = 2     # Mitsuba's conductor / roughconductor (kernels.conductor)
+
+# A conductor's row reuses principled columns under its own names: the albedo columns hold
+# its specular reflectance (a tint, textured by T_ALBEDO), then the microfacet alphas along
+# the tangent (dp/du) and the bitangent (textured by T_COND_ALPHA_U / T_COND_ALPHA_V, read
+# as luminance), the complex index of refraction eta + i k per channel (relative to the
+# outside medium), and the distribution (COND_GGX or COND_BECKMANN).
+M_COND_ALPHA_U = 8
+M_COND_ALPHA_V = 9
+M_COND_ETA = 10       # rgb
+M_COND_K = 13         # rgb
+M_COND_DISTRIBUTION = 16
+COND_GGX = 0
+COND_BECKMANN = 1
 
 # Texture slots: mat_tex[m, T_*] is the texture that replaces a parameter, or NO_TEXTURE.
 T_ALBEDO = 0
@@ -111,6 +125,8 @@ T_TRANSMISSION = 13
 T_NORMAL = 14
 T_ALPHA = 15
 N_SLOTS = 16
+T_COND_ALPHA_U = T_ROUGHNESS    # a conductor's textured alphas (MAT_CONDUCTOR)
+T_COND_ALPHA_V = T_METALLIC
 NO_TEXTURE = -1
 
 # ---- The principled parameter tuple (kernels.principled), read at a shading point ------------
@@ -128,6 +144,13 @@ P_FLATNESS = 12       # the scene's "subsurface" (Mitsuba's name)
 P_TRANSMISSION = 13
 P_SIZE = 14
 # the fields' names, in tuple order (tests build parameter tuples by name)
+# A conductor's parameter tuple (MAT_CONDUCTOR; kernels.conductor) keeps P_BASE (its specular
+# reflectance) and P_TRANSMISSION (0); between them:
+P_COND_ALPHA_U = 3
+P_COND_ALPHA_V = 4
+P_COND_ETA = 5        # rgb
+P_COND_K = 8          # rgb
+P_COND_DISTRIBUTION = 11
 P_FIELDS = ("r", "g", "b", "roughness", "metallic", "eta", "spec_tint", "anisotropic",
             "sheen", "sheen_tint", "clearcoat", "clearcoat_gloss", "flatness",
             "transmission")
@@ -378,6 +401,7 @@ class Features(NamedTuple):
     flatness: bool = True      # the scene's "subsurface"
     spec_tint: bool = True
     anisotropic: bool = True
+    conductor: bool = False    # a conductor material (MAT_CONDUCTOR)
 
 
 class Specialisation(NamedTuple):
@@ -407,6 +431,8 @@ class Specialisation(NamedTuple):
     vertex_colors: bool    # interpolated vertex colours multiply the base colour
     one_sided: bool        # some material reflects on its front side only
     alpha: bool            # some material is cut out or transparent (M_ALPHA_MODE)
+    conductor: bool        # some material is a conductor (MAT_CONDUCTOR)
+    glossy: bool           # principled or conductor: BSDFs beyond Lambert's
 
 
 def specialise(features):
@@ -421,12 +447,13 @@ def specialise(features):
         any_environment=f.environment or f.env_map, nee=any_lights or f.env_map,
         smooth=f.smooth, principled=f.principled, textures=f.textures,
         normal_map=normal_map, tangents=f.tangents, thin_lens=f.thin_lens, fold=fold,
-        lean=not f.principled and not fold, sobol=f.sobol,
+        lean=not (f.principled or f.conductor) and not fold, sobol=f.sobol,
         wrap_modes=f.wrap_modes and f.textures, mipmaps=f.mipmaps and f.textures,
         lobes=(f.dielectric, f.clearcoat, f.sheen, f.transmission, f.flatness, f.spec_tint,
                f.anisotropic),
         light_tree=f.light_tree and any_lights, hide_emitters=f.hide_emitters,
-        vertex_colors=f.vertex_colors, one_sided=f.one_sided, alpha=f.alpha)
+        vertex_colors=f.vertex_colors, one_sided=f.one_sided, alpha=f.alpha,
+        conductor=f.conductor, glossy=f.principled or f.conductor)
 
 
 class SceneArrays(NamedTuple):

@@ -97,7 +97,7 @@ class Geometry(NamedTuple):
 
 class Shading(NamedTuple):
     """The material and shading frame at a surface, and where rays leave it."""
-    is_principled: bool
+    kind: int           # layout MAT_*: which BSDF params feeds
     params: tuple
     ng: tuple           # the side normal (scatter.side_normal)
     ng_tri: tuple       # the triangle's normal as the shading frame left it
@@ -251,7 +251,7 @@ def make_surface_steps(features, target="cpu"):
     @step
     def surface_shading(scene, hit, geo):
         """The material (with vertex colours) and the shading frame at the surface."""
-        is_principled, params = material_at(scene.mat, scene.mat_tex, scene.tex_data,
+        kind, params = material_at(scene.mat, scene.mat_tex, scene.tex_data,
                                             scene.tex_int, scene.tex_f, geo.m, geo.tu, geo.tv,
                                             geo.fp)
         if VERTEX_COLORS:
@@ -262,7 +262,7 @@ def make_surface_steps(features, target="cpu"):
             params[P_TRANSMISSION] > ZERO, geo.tu, geo.tv, geo.fp)
         origin = ray_origin(scene.tri_n, hit.tri, geo.p, hit.b1, hit.b2, geo.v0, geo.e1,
                             geo.e2, ng)
-        return Shading(is_principled, params, side_normal(ng, ns, wp), ng, ns, tangent,
+        return Shading(kind, params, side_normal(ng, ns, wp), ng, ns, tangent,
                        bitangent, wp, local_wo(geo.wo, tangent, bitangent, ns), origin)
 
     @step
@@ -271,7 +271,7 @@ def make_surface_steps(features, target="cpu"):
         kind (``emitter``: a sample_emitter record): (radiance added, shadow rays
         traced). ``key``: (path key, first dimension) of transparency's numbers."""
         wi, t_max, le, pdf_light, is_delta, light_tri = emitter
-        f, pdf_bsdf = eval_world(sh.is_principled, sh.params, geo.wo, sh.wo_l, wi,
+        f, pdf_bsdf = eval_world(sh.kind, sh.params, geo.wo, sh.wo_l, wi,
                                  sh.tangent, sh.bitangent, sh.ns, sh.ng, sh.wp)
         if not (max_comp(f) > ZERO):
             return (ZERO, ZERO, ZERO), 0
@@ -288,7 +288,7 @@ def make_surface_steps(features, target="cpu"):
     def next_ray(sh, geo, tri, u_lobe, u1, u2):
         """BSDF sampling: (o, d, skip) of the next ray, its weight f cos / pdf and pdf
         (pdf 0: no sample)."""
-        wi, weight, pdf_bsdf = sample_world(sh.is_principled, sh.params, geo.wo, sh.wo_l,
+        wi, weight, pdf_bsdf = sample_world(sh.kind, sh.params, geo.wo, sh.wo_l,
                                             sh.tangent, sh.bitangent, sh.ns, sh.ng, sh.wp,
                                             u_lobe, u1, u2)
         return (leave(geo.p, sh.ng, wi, sh.origin), wi, own_skip(tri, sh.ng_tri, sh.ng, wi),

@@ -3,14 +3,16 @@ the geometric surface.
 
 ``make_scatter(features)`` returns the steps specialised for one feature set (see
 :mod:`.integrator`). The local BSDFs are :mod:`.materials` (Lambertian) and
-:mod:`.principled`.
+:mod:`.principled` and :mod:`.conductor`; ``kind`` (layout MAT_*) says which one a parameter
+tuple belongs to.
 """
 import functools
 from typing import NamedTuple
 
 from .constants import INV_PI, ONE, TWO, ZERO
 from .device import device, step_marker
-from .layout import P_BASE, specialise
+from .conductor import conductor_eval, conductor_sample
+from .layout import MAT_CONDUCTOR, MAT_PRINCIPLED, P_BASE, specialise
 from .materials import diffuse_eval_local, diffuse_sample_local
 from .normalmap import NM_FLAT_COS, consistent_with_smooth, mapped_frame, mirror_smooth
 from .principled import Lobes, make_principled
@@ -54,6 +56,39 @@ class ScatterSteps(NamedTuple):
 
 
 @functools.lru_cache(maxsize=None)
+def make_material(features, target="cpu"):
+    """(material_eval, material_sample): the BSDF of a material kind (``kind``, layout
+    MAT_*) in the local shading frame, for scenes with ``features``."""
+    S = specialise(features)
+    step = step_marker(target)
+    PRINCIPLED = S.principled
+    CONDUCTOR = S.conductor
+    principled_eval, principled_sample = make_principled(Lobes(*S.lobes))
+
+    @step
+    def material_eval(kind, params, wo_l, wi_l):
+        if PRINCIPLED:
+            if kind == MAT_PRINCIPLED:
+                return principled_eval(params, wo_l, wi_l)
+        if CONDUCTOR:
+            if kind == MAT_CONDUCTOR:
+                return conductor_eval(params, wo_l, wi_l)
+        return diffuse_eval_local(base_color(params), wo_l, wi_l)
+
+    @step
+    def material_sample(kind, params, wo_l, u_choice, u1, u2):
+        if PRINCIPLED:
+            if kind == MAT_PRINCIPLED:
+                return principled_sample(params, wo_l, u_choice, u1, u2)
+        if CONDUCTOR:
+            if kind == MAT_CONDUCTOR:
+                return conductor_sample(params, wo_l, u1, u2)
+        return diffuse_sample_local(base_color(params), wo_l, u1, u2)
+
+    return material_eval, material_sample
+
+
+@functools.lru_cache(maxsize=None)
 def make_scatter(features, target="cpu"):
     """The scattering steps for scenes with ``features``."""
     S = specialise(features)
@@ -62,31 +97,17 @@ def make_scatter(features, target="cpu"):
     FOLD = S.fold
     LEAN = S.lean
     NORMAL_MAP = S.normal_map
-    principled_eval, principled_sample = make_principled(Lobes(*S.lobes))
+    material_eval, material_sample = make_material(features, target)
 
     @step
-    def material_eval(is_principled, params, wo_l, wi_l):
-        if PRINCIPLED:
-            if is_principled:
-                return principled_eval(params, wo_l, wi_l)
-        return diffuse_eval_local(base_color(params), wo_l, wi_l)
-
-    @step
-    def material_sample(is_principled, params, wo_l, u_choice, u1, u2):
-        if PRINCIPLED:
-            if is_principled:
-                return principled_sample(params, wo_l, u_choice, u1, u2)
-        return diffuse_sample_local(base_color(params), wo_l, u1, u2)
-
-    @step
-    def mapped_lobe(is_principled, params, tm, bm, wp, wo_l, wi_l):
+    def mapped_lobe(kind, params, tm, bm, wp, wo_l, wi_l):
         """The material in the normal-mapped frame (tm, bm, wp), directions in the smooth
         frame: f |cos| and pdf."""
-        return material_eval(is_principled, params, to_local(wo_l, tm, bm, wp),
+        return material_eval(kind, params, to_local(wo_l, tm, bm, wp),
                              to_local(wi_l, tm, bm, wp))
 
     @step
-    def mapped_eval(is_principled, params, wp, wo_l, wi_l):
+    def mapped_eval(kind, params, wp, wo_l, wi_l):
         """f |cos| and pdf of a normal-mapped material in the smooth frame: the material
         shaded with the mapped normal wp, the part of its lobes on the wrong side of the
         smooth surface folded back across it (see .normalmap)."""
@@ -94,20 +115,20 @@ def make_scatter(features, target="cpu"):
         f = (ZERO, ZERO, ZERO)
         pdf = ZERO
         if consistent_with_smooth(wp, wo_l, wi_l):
-            f, pdf = mapped_lobe(is_principled, params, tm, bm, wp, wo_l, wi_l)
+            f, pdf = mapped_lobe(kind, params, tm, bm, wp, wo_l, wi_l)
         wm = mirror_smooth(wi_l)
         if not consistent_with_smooth(wp, wo_l, wm):
-            f2, pdf2 = mapped_lobe(is_principled, params, tm, bm, wp, wo_l, wm)
+            f2, pdf2 = mapped_lobe(kind, params, tm, bm, wp, wo_l, wm)
             f = add(f, f2)
             pdf += pdf2
         return f, pdf
 
     @step
-    def mapped_sample(is_principled, params, wp, wo_l, u_choice, u1, u2):
+    def mapped_sample(kind, params, wp, wo_l, u_choice, u1, u2):
         """(wi, weight, pdf) of mapped_eval: the material sampled in the mapped frame, a
         direction on the wrong side of the smooth surface mirrored across it."""
         tm, bm = mapped_frame(wp)
-        wi_m, weight, pdf = material_sample(is_principled, params, to_local(wo_l, tm, bm, wp),
+        wi_m, weight, pdf = material_sample(kind, params, to_local(wo_l, tm, bm, wp),
                                             u_choice, u1, u2)
         if not (pdf > ZERO):
             return wi_m, weight, ZERO
@@ -120,27 +141,27 @@ def make_scatter(features, target="cpu"):
             folded = not consistent_with_smooth(wp, wo_l, mirror_smooth(wi))
         if folded:
             # two lobes meet at wi: the effective f and pdf are their sums
-            f, pdf = mapped_eval(is_principled, params, wp, wo_l, wi)
+            f, pdf = mapped_eval(kind, params, wp, wo_l, wi)
             if not (pdf > ZERO):
                 return wi, weight, ZERO
             weight = scale(f, ONE / pdf)
         return wi, weight, pdf
 
     @step
-    def bsdf_eval(is_principled, params, wp, wo_l, wi_l):
+    def bsdf_eval(kind, params, wp, wo_l, wi_l):
         """f |cos| and pdf in the shading frame: the material, normal-mapped where wp (the
         mapped normal in that frame) is not the frame's z."""
         if NORMAL_MAP:
             if wp[2] < NM_FLAT_COS:
-                return mapped_eval(is_principled, params, wp, wo_l, wi_l)
-        return material_eval(is_principled, params, wo_l, wi_l)
+                return mapped_eval(kind, params, wp, wo_l, wi_l)
+        return material_eval(kind, params, wo_l, wi_l)
 
     @step
-    def bsdf_sample(is_principled, params, wp, wo_l, u_choice, u1, u2):
+    def bsdf_sample(kind, params, wp, wo_l, u_choice, u1, u2):
         if NORMAL_MAP:
             if wp[2] < NM_FLAT_COS:
-                return mapped_sample(is_principled, params, wp, wo_l, u_choice, u1, u2)
-        return material_sample(is_principled, params, wo_l, u_choice, u1, u2)
+                return mapped_sample(kind, params, wp, wo_l, u_choice, u1, u2)
+        return material_sample(kind, params, wo_l, u_choice, u1, u2)
 
     @step
     def local_wo(wo, t, s, n):
@@ -150,7 +171,7 @@ def make_scatter(features, target="cpu"):
         return to_local(wo, t, s, n)
 
     @step
-    def eval_world(is_principled, params, wo, wo_l, wi, t, s, n, ng, wp):
+    def eval_world(kind, params, wo, wo_l, wi, t, s, n, ng, wp):
         """BSDF * |cos| and pdf for world direction wi.
 
         Where the shading normal differs from the geometric one, part of a lobe can point
@@ -174,22 +195,22 @@ def make_scatter(features, target="cpu"):
         f = (ZERO, ZERO, ZERO)
         pdf = ZERO
         if consistent(wo, wo_l, wi, wi_l, ng):
-            f, pdf = bsdf_eval(is_principled, params, wp, wo_l, wi_l)
+            f, pdf = bsdf_eval(kind, params, wp, wo_l, wi_l)
         if FOLD:
             wm = mirror(wi, ng)
             wm_l = to_local(wm, t, s, n)
             if not consistent(wo, wo_l, wm, wm_l, ng):
-                f2, pdf2 = bsdf_eval(is_principled, params, wp, wo_l, wm_l)
+                f2, pdf2 = bsdf_eval(kind, params, wp, wo_l, wm_l)
                 f = add(f, f2)
                 pdf += pdf2
         return f, pdf
 
     @step
-    def sample_world(is_principled, params, wo, wo_l, t, s, n, ng, wp, u_choice, u1, u2):
+    def sample_world(kind, params, wo, wo_l, t, s, n, ng, wp, u_choice, u1, u2):
         """(wi, weight = f |cos| / pdf, pdf) of a sampled world direction; pdf = 0: the
         path is absorbed. A direction on the wrong side of the geometric surface is folded
         back (see eval_world), whose effective BSDF and pdf then give the weight."""
-        wi_l, weight, pdf_bsdf = bsdf_sample(is_principled, params, wp, wo_l, u_choice, u1, u2)
+        wi_l, weight, pdf_bsdf = bsdf_sample(kind, params, wp, wo_l, u_choice, u1, u2)
         if not (pdf_bsdf > ZERO):
             return wi_l, weight, ZERO
         wi = to_world(wi_l, t, s, n)   # unit: orthonormal frame
@@ -210,7 +231,7 @@ def make_scatter(features, target="cpu"):
                 wm = mirror(wi, ng)
                 folded = not consistent(wo, wo_l, wm, to_local(wm, t, s, n), ng)
             if folded:
-                f, pdf_bsdf = eval_world(is_principled, params, wo, wo_l, wi, t, s, n, ng, wp)
+                f, pdf_bsdf = eval_world(kind, params, wo, wo_l, wi, t, s, n, ng, wp)
                 if not (pdf_bsdf > ZERO):
                     return wi, weight, ZERO
                 weight = scale(f, ONE / pdf_bsdf)

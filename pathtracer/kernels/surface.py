@@ -19,6 +19,8 @@ from .layout import (ALPHA_BLEND, ALPHA_MASK, M_ALPHA, M_ALPHA_CUTOFF, M_ALPHA_M
                      M_CLEARCOAT_GLOSS, M_EMISSION,
                      M_ETA, M_METALLIC, M_ROUGHNESS, M_SHEEN, M_SHEEN_TINT, M_SPEC_TINT,
                      M_SPECULAR, M_SUBSURFACE, M_TRANSMISSION, M_TYPE, MAT_PRINCIPLED,
+                     M_COND_ALPHA_U, M_COND_ALPHA_V, M_COND_DISTRIBUTION, M_COND_ETA,
+                     M_COND_K, MAT_CONDUCTOR, MAT_DIFFUSE, T_COND_ALPHA_U, T_COND_ALPHA_V,
                      T_ALBEDO, T_ANISOTROPIC, T_CLEARCOAT, T_CLEARCOAT_GLOSS,
                      T_EMISSION, T_ETA, T_METALLIC, T_NORMAL, T_ROUGHNESS, T_SHEEN,
                      T_SHEEN_TINT, T_SPEC_TINT, T_SPECULAR, T_SUBSURFACE, T_TRANSMISSION,
@@ -101,6 +103,8 @@ def make_surface(features, target="cpu"):
     step = step_marker(target)
     TEXTURES = S.textures
     PRINCIPLED = S.principled
+    CONDUCTOR = S.conductor
+    GLOSSY = S.glossy
     SMOOTH = S.smooth
     TANGENTS = S.tangents
     NORMAL_MAP = S.normal_map
@@ -197,19 +201,38 @@ def make_surface(features, target="cpu"):
                 transmission)
 
     @step
+    def conductor_at(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v, fp):
+        """The conductor parameter tuple (layout P_COND_*) of material m at (u, v)."""
+        tint = param3(mat, mat_tex, tex_data, tex_int, tex_f, m, T_ALBEDO, M_ALBEDO, u, v,
+                      fp)
+        return (max(tint[0], ZERO), max(tint[1], ZERO), max(tint[2], ZERO),
+                max(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_COND_ALPHA_U,
+                           M_COND_ALPHA_U, u, v, fp), ZERO),
+                max(param1(mat, mat_tex, tex_data, tex_int, tex_f, m, T_COND_ALPHA_V,
+                           M_COND_ALPHA_V, u, v, fp), ZERO),
+                mat[m, M_COND_ETA], mat[m, M_COND_ETA + 1], mat[m, M_COND_ETA + 2],
+                mat[m, M_COND_K], mat[m, M_COND_K + 1], mat[m, M_COND_K + 2],
+                mat[m, M_COND_DISTRIBUTION], ZERO, ZERO)
+
+    @step
     def material_at(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v, fp):
-        """(is_principled, parameter tuple) of material m at (u, v); a diffuse material
-        fills only the base colour (and eta 1)."""
+        """(kind, parameter tuple) of material m at (u, v): kind MAT_DIFFUSE (which fills
+        only the base colour, and eta 1), MAT_PRINCIPLED or MAT_CONDUCTOR."""
+        kind = MAT_DIFFUSE
+        if GLOSSY:
+            kind = int(mat[m, M_TYPE])
+        if PRINCIPLED:
+            if kind == MAT_PRINCIPLED:
+                return kind, principled_at(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v,
+                                           fp)
+        if CONDUCTOR:
+            if kind == MAT_CONDUCTOR:
+                return kind, conductor_at(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v,
+                                          fp)
         alb = param3(mat, mat_tex, tex_data, tex_int, tex_f, m, T_ALBEDO, M_ALBEDO, u, v,
                      fp)
-        params = (alb[0], alb[1], alb[2], ZERO, ZERO, ONE, ZERO, ZERO, ZERO, ZERO,
-                  ZERO, ZERO, ZERO, ZERO)
-        is_principled = False
-        if PRINCIPLED:
-            is_principled = mat[m, M_TYPE] == MAT_PRINCIPLED
-            if is_principled:
-                params = principled_at(mat, mat_tex, tex_data, tex_int, tex_f, m, u, v, fp)
-        return is_principled, params
+        return MAT_DIFFUSE, (alb[0], alb[1], alb[2], ZERO, ZERO, ONE, ZERO, ZERO, ZERO,
+                             ZERO, ZERO, ZERO, ZERO, ZERO)
 
     @step
     def mapped_normal(mat_tex, tex_data, tex_int, tex_f, tri_t, tri, m, u, v, fp, ns,
@@ -271,14 +294,14 @@ def make_surface(features, target="cpu"):
             ns = normalize(madd(ns, wo, s_o * (HORIZON_EPS - c_o)))
         if has_tangent:
             tangent = tangent_on(tangent, ns)
-        elif PRINCIPLED:
+        elif GLOSSY:
             # Without texture coordinates the tangent is dp/du of the triangle's
             # barycentric parameterisation, its first edge, projected onto the shading
             # normal: Mitsuba 3's choice, so that anisotropy can be checked against it.
             tangent = tangent_on(e1, ns)
         else:
             tangent, bitangent = frame(ns)   # isotropic BSDFs only: any tangent will do
-        if PRINCIPLED or TANGENTS:
+        if GLOSSY or TANGENTS:
             bitangent = cross(ns, tangent)
         wp = (ZERO, ZERO, ONE)
         if NORMAL_MAP:

@@ -36,7 +36,9 @@ from ..kernels.layout import (CAM_CONE, CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_
                               ALPHA_BLEND, ALPHA_MASK, ALPHA_OPAQUE, M_ALPHA, M_ALPHA_CUTOFF,
                               M_ALPHA_MODE, T_ALPHA,
                               M_ALBEDO, M_ANISOTROPIC, M_EMISSION, M_ETA, M_ONE_SIDED,
-                              M_TWO_SIDED, M_TYPE,
+                              M_TWO_SIDED, M_TYPE, COND_BECKMANN, COND_GGX,
+                              M_COND_ALPHA_U, M_COND_ALPHA_V, M_COND_DISTRIBUTION, M_COND_ETA,
+                              M_COND_K, MAT_CONDUCTOR, T_COND_ALPHA_U, T_COND_ALPHA_V,
                               MAT_DIFFUSE, MAT_PRINCIPLED, MAT_WIDTH, MATERIAL_PARAMS, N_SLOTS,
                               NO_TEXTURE, PL_AXIS, PL_CONE_OFFSET, PL_CONE_SCALE, PL_INTENSITY,
                               PL_POSITION, PL_WIDTH, T_ALBEDO, T_EMISSION,
@@ -173,7 +175,7 @@ def compile_scene(desc, use_cache=True, bvh_options=None, memo=None):
         light_tree=tree is not None, hide_emitters=desc.render.hide_emitters,
         vertex_colors=tri.has_colors, one_sided=bool((mat[:, M_ONE_SIDED] > 0).any()),
         alpha=bool((mat[:, M_ALPHA_MODE] != ALPHA_OPAQUE).any()),
-        **principled_lobes(mat, mat_tex))
+        conductor=tables.any_conductor, **principled_lobes(mat, mat_tex))
     cam = camera_array(desc.camera, tri.shift, desc.render.spp)
     if not (np.isfinite(cam).all() and np.abs(cam).max() <= limits.FLOAT32_MAX):
         raise SceneError("the camera's numbers overflow float32 (position, fov, aperture or "
@@ -283,6 +285,7 @@ class MaterialTables:
         self.any_normal_map = False
         self.any_anisotropic = False
         self.any_principled = False
+        self.any_conductor = False
         self._default = None
 
     def texture(self, spec, slot=None):
@@ -332,7 +335,8 @@ class MaterialTables:
         row[M_ALBEDO:M_ALBEDO + 3] = albedo
         row[M_EMISSION:M_EMISSION + 3] = emission
         row[M_TWO_SIDED] = 1.0 if two_sided else 0.0
-        row[M_TYPE] = MAT_PRINCIPLED if mtype == "principled" else MAT_DIFFUSE
+        row[M_TYPE] = {"principled": MAT_PRINCIPLED, "conductor": MAT_CONDUCTOR}.get(
+            mtype, MAT_DIFFUSE)
         power = float(np.mean(emission))
         if "albedo" in textures:
             tex[T_ALBEDO] = self.texture(textures["albedo"], "albedo")
@@ -342,6 +346,11 @@ class MaterialTables:
             tex[T_EMISSION] = t
             row[M_EMISSION:M_EMISSION + 3] = textures["emission"].scale   # non-zero: emits
             power = float(np.mean(self.tex_images[t]) * np.mean(textures["emission"].scale))
+        if mtype == "conductor":
+            self._conductor(row, tex, numbers or {}, textures)
+        if normal_map is not None:
+            tex[T_NORMAL] = self.texture(normal_map, "normalMap")
+            self.any_normal_map = True
         if mtype == "principled":
             self.any_principled = True
             numbers = numbers or {}
@@ -354,13 +363,27 @@ class MaterialTables:
                 row[M_ETA] = 0.0     # derived from specular in the kernel
             if row[M_ANISOTROPIC] > 0 or "anisotropic" in textures:
                 self.any_anisotropic = True
-            if normal_map is not None:
-                tex[T_NORMAL] = self.texture(normal_map, "normalMap")
-                self.any_normal_map = True
         self.rows.append(row)
         self.tex_rows.append(tex)
         self.power.append(power)
         return len(self.rows) - 1
+
+    def _conductor(self, row, tex, numbers, textures):
+        """A conductor's columns (layout M_COND_*): tint in the albedo columns, alphas,
+        eta and k (defaults: a perfect mirror, Mitsuba's material 'none')."""
+        self.any_conductor = True
+        row[M_COND_ALPHA_U] = numbers.get("alphaU", 0.0)
+        row[M_COND_ALPHA_V] = numbers.get("alphaV", row[M_COND_ALPHA_U])
+        row[M_COND_ETA:M_COND_ETA + 3] = numbers.get("eta", (0.0, 0.0, 0.0))
+        row[M_COND_K:M_COND_K + 3] = numbers.get("k", (1.0, 1.0, 1.0))
+        row[M_COND_DISTRIBUTION] = (COND_BECKMANN if numbers.get("distribution") == "beckmann"
+                                    else COND_GGX)
+        for key, slot in (("alphaU", T_COND_ALPHA_U), ("alphaV", T_COND_ALPHA_V)):
+            if key in textures:
+                tex[slot] = self.texture(textures[key], key)
+        if row[M_COND_ALPHA_U] != row[M_COND_ALPHA_V] or "alphaU" in textures or \
+                "alphaV" in textures:
+            self.any_anisotropic = True     # tangents from texture coordinates
 
     def arrays(self):
         """mat, mat_tex, tex_data, tex_int, tex_f (layout: materials and textures)."""
@@ -473,7 +496,10 @@ def _check_uvs(desc, objects, tables):
         if geo.uv is not None or not len(geo.materials):
             continue
         for row in np.unique(geo.materials):
-            used = [slot_names.get(k, str(k)) for k in np.nonzero(
+            names = dict(slot_names)
+            if tables.rows[row][M_TYPE] == MAT_CONDUCTOR:
+                names.update({T_COND_ALPHA_U: "alphaU", T_COND_ALPHA_V: "alphaV"})
+            used = [names.get(k, str(k)) for k in np.nonzero(
                 tables.tex_rows[row] != NO_TEXTURE)[0]]
             if used:
                 what = "its OBJ file has no 'vt' lines" if obj.file else \

@@ -550,12 +550,13 @@ def _material(n, base):
     name = n.string("name")
     if name is None:
         raise n.error("missing required key 'name'")
-    mtype = n.string("type", "principled", choices=("principled", "diffuse"))
+    mtype = n.string("type", "principled", choices=("principled", "diffuse", "conductor"))
     if n.has("albedo") and n.has("baseColor"):
         raise n.error("give 'albedo' or 'baseColor', not both", "baseColor")
     m = Material(name=name, type=mtype, pointer=n.pointer)
     key = "albedo" if n.has("albedo") or not n.has("baseColor") else "baseColor"
-    m.albedo = _color_or_texture(n, key, ALBEDO_DEFAULT, base, "sRGB", m, "albedo",
+    m.albedo = _color_or_texture(n, key, (1.0, 1.0, 1.0) if mtype == "conductor" else
+                                 ALBEDO_DEFAULT, base, "sRGB", m, "albedo",
                                  COLOR_LIMITS["albedo"])
     m.emission = _color_or_texture(n, "emission", EMISSION_DEFAULT, base, "sRGB", m,
                                    "emission", COLOR_LIMITS["emission"])
@@ -578,12 +579,40 @@ def _material(n, base):
                 m.numbers[k] = n.number(k, lo=lo, hi=hi, lo_open=(k == "eta"))
         if n.has("normalMap"):
             m.normal_map = _texture_spec(n, "normalMap", base, "linear")
+    elif mtype == "conductor":
+        _conductor(n, m, base)
+        if n.has("normalMap"):
+            m.normal_map = _texture_spec(n, "normalMap", base, "linear")
     else:
         for k in list(PRINCIPLED_NUMBERS) + ["normalMap"]:
             if n.has(k):
                 raise n.error(f"'{k}' belongs to the principled material, not 'diffuse'", k)
     n.finish()
     return m
+
+
+def _conductor(n, m, base):
+    """A conductor (Mitsuba's conductor / roughconductor): ``albedo`` is its specular
+    reflectance (a tint, default 1), ``eta`` and ``k`` its complex index of refraction per
+    channel (default 0 and 1: a perfect mirror), ``alphaU`` / ``alphaV`` the microfacet
+    alphas along the tangent and the bitangent (default 0: smooth; ``alphaV`` defaults to
+    ``alphaU``; a number or a one-channel texture) and ``distribution`` ggx or beckmann."""
+    m.numbers["eta"] = tuple(n.color("eta", (0.0, 0.0, 0.0), hi=limits.MAX_IOR))
+    m.numbers["k"] = tuple(n.color("k", (1.0, 1.0, 1.0), hi=limits.MAX_IOR))
+    for key in ("alphaU", "alphaV"):
+        if not n.has(key):
+            continue
+        v = n.raw(key)
+        if isinstance(v, (str, dict)):
+            m.textures[key] = _texture_spec(n, key, base, "linear")
+            m.numbers[key] = 0.0
+        else:
+            m.numbers[key] = n.number(key, lo=0.0, hi=1.0)
+    if "alphaU" in m.numbers and "alphaV" not in m.numbers:
+        m.numbers["alphaV"] = m.numbers["alphaU"]
+        if "alphaU" in m.textures:
+            m.textures["alphaV"] = m.textures["alphaU"]
+    m.numbers["distribution"] = n.string("distribution", "ggx", choices=("ggx", "beckmann"))
 
 
 ALPHA_MODES = ("opaque", "mask", "blend")

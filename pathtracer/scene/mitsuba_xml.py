@@ -25,6 +25,10 @@ from .meshes import load_mesh
 # principled parameters: Mitsuba name -> scene-format key (kernels.layout's parameter table)
 from ..kernels.layout import MATERIAL_PARAMS
 PRINCIPLED_KEYS = {p.mitsuba: p.key for p in MATERIAL_PARAMS if p.mitsuba}
+# the principled parameters Mitsuba 3 lets a texture give (eta and specular are floats)
+PRINCIPLED_TEXTURABLE = {"roughness", "metallic", "specularTint", "anisotropic", "sheen",
+                         "sheenTint", "clearcoat", "clearcoatGloss", "subsurface",
+                         "transmission"}
 
 # named index of refraction values Mitsuba accepts for dielectrics (its ior table, the common ones)
 IOR_NAMES = {"vacuum": 1.0, "air": 1.00028, "water": 1.3330, "ice": 1.31, "acrylic glass": 1.49,
@@ -636,9 +640,23 @@ def _rgb_or_texture(r, el, tag_el):
         tag, v = target.tag, target
     if tag == "texture":
         kind = v.get("type")
-        if kind not in ("bitmap", "checkerboard"):
-            raise r.error(f"texture {kind!r} is not supported (bitmap, checkerboard)", v)
+        if kind not in ("bitmap", "checkerboard", "rawconstant"):
+            raise r.error(f"texture {kind!r} is not supported (bitmap, checkerboard, "
+                          "rawconstant)", v)
         tp = r.params(v)
+        if kind == "rawconstant":
+            # a constant value read as it is (no colour conversion): a 1 x 1 linear image
+            tag_v, el_v = tp.get("value", ("float", None))
+            if el_v is None:
+                raise r.error("rawconstant without a value", v)
+            value = [float(x) for x in re.split(r"[,\s]+", el_v.get("value").strip())]
+            if len(value) not in (1, 3):
+                raise r.error("rawconstant: expected one or three numbers", el_v)
+            img = np.array([[value * 3 if len(value) == 1 else value]], np.float32)
+            buf = io.BytesIO()
+            np.save(buf, img, allow_pickle=False)
+            return {"texture": cached_file(buf.getvalue(), ".npy", "mitsuba-textures"),
+                    "colorSpace": "linear", "filter": "nearest"}
         if kind == "checkerboard":
             # Mitsuba's checkerboard (checkerboard.cpp): color0 where the fractional parts
             # of (u, v) are both above 1/2 or both not, else color1 -- exactly a 2 x 2
@@ -698,7 +716,7 @@ def _bsdf(r, el, name):
     (diffuse, principled without transmission, conductors) are black from behind unless
     wrapped in twosided: oneSided (checked against Mitsuba 3.9.1's evaluation)."""
     mat = _bsdf_kind(r, el, name)
-    if el.get("type") not in ("twosided", "mask") and not mat.get("transmission"):
+    if el.get("type") not in ("twosided", "mask", "null") and not mat.get("transmission"):
         mat["oneSided"] = True
     return mat
 
@@ -732,6 +750,11 @@ def _bsdf_kind(r, el, name):
                 if opacity[1] is not None else 0.5
         mat["alphaMode"] = "blend"
         return mat
+    if kind == "null":
+        # Mitsuba's null BSDF: rays pass through the surface as if it were not there (it
+        # bounds media, or carries an emitter): a cut-out everywhere (alpha 0, mask)
+        _only(r, el, p, ())
+        return {"name": name, "type": "diffuse", "alpha": 0.0, "alphaMode": "mask"}
     if kind == "diffuse":
         mat = {"name": name, "type": "diffuse"}
         if "reflectance" in p:
@@ -743,7 +766,15 @@ def _bsdf_kind(r, el, name):
             if k == "base_color":
                 mat["albedo"] = _rgb_or_texture(r, el, (tag, v))
             elif k in PRINCIPLED_KEYS and PRINCIPLED_KEYS[k] not in ("albedo", "emission"):
-                mat[PRINCIPLED_KEYS[k]] = _number(r, (tag, v), k)
+                if tag in ("texture", "ref") and PRINCIPLED_KEYS[k] in PRINCIPLED_TEXTURABLE:
+                    # a textured number, read as the texture's luminance (as Mitsuba reads
+                    # a colour texture given for a float parameter)
+                    tex = _rgb_or_texture(r, el, (tag, v))
+                    if isinstance(tex, dict):
+                        tex["colorSpace"] = "linear"
+                    mat[PRINCIPLED_KEYS[k]] = tex
+                else:
+                    mat[PRINCIPLED_KEYS[k]] = _number(r, (tag, v), k)
             else:
                 raise r.error(f"principled parameter {k!r} is not supported", v)
         return mat
@@ -762,16 +793,23 @@ def _bsdf_kind(r, el, name):
                          "specular_transmittance"))
         return mat
     if kind in ("conductor", "roughconductor"):
-        reflectance = r.get(p, "specular_reflectance", "color", [1.0] * 3)
-        f0 = _conductor_f0(r, el, p)
-        mat = {"name": name, "type": "principled", "metallic": 1.0, "roughness": 0.0,
-               "albedo": [float(a * b) for a, b in zip(reflectance, f0)]}
-        if kind == "roughconductor" and ("alpha_u" in p or "alpha_v" in p):
-            mat["roughness"], mat["anisotropic"] = _anisotropic_roughness(r, el, p)
-        elif kind == "roughconductor":
-            mat["roughness"] = _roughness(r, el, p)
+        # exact: Mitsuba's microfacet conductor with the complex Fresnel term (the
+        # conductor material kind, kernels.conductor)
+        eta, k = _conductor_eta_k(r, el, p)
+        mat = {"name": name, "type": "conductor", "eta": eta, "k": k}
+        if "specular_reflectance" in p:
+            mat["albedo"] = _rgb_or_texture(r, el, p["specular_reflectance"])
+        if kind == "roughconductor":
+            mat["distribution"] = _distribution(r, el, p)
+            if "alpha_u" in p or "alpha_v" in p:
+                if "alpha" in p:
+                    raise r.error("give alpha or alpha_u and alpha_v, not both", el)
+                mat["alphaU"] = _alpha_value(r, el, p, "alpha_u")
+                mat["alphaV"] = _alpha_value(r, el, p, "alpha_v")
+            else:
+                mat["alphaU"] = _alpha_value(r, el, p, "alpha")
         _only(r, el, p, ("material", "alpha", "distribution", "specular_reflectance", "eta",
-                         "k", "ext_eta", "alpha_u", "alpha_v"))
+                         "k", "ext_eta", "alpha_u", "alpha_v", "sample_visible"))
         return mat
     if kind in ("plastic", "roughplastic"):
         return _plastic(r, el, p, name, kind)
@@ -797,7 +835,7 @@ def _bsdf_kind(r, el, name):
         return mat
     raise r.error(f"BSDF {kind!r} is not supported: diffuse, principled, dielectric, "
                   "roughdielectric, conductor, roughconductor, plastic, roughplastic, "
-                  "normalmap, mask, twosided", el)
+                  "normalmap, mask, null, twosided", el)
 
 
 def _fresnel_dielectric(cos_i, eta):
@@ -869,37 +907,42 @@ def conductor_table():
     return out
 
 
-def _conductor_f0(r, el, p):
-    """The reflectance at normal incidence of a conductor's complex index of refraction
-    eta + i k (relative to ext_eta), per channel: ((n - 1)^2 + k^2) / ((n + 1)^2 + k^2).
-    Mitsuba's named materials (its RGB values of their spectral data), or eta and k
-    given; 'none' (the default) is a perfect mirror. The principled BSDF's metallic lobe
-    then blends to white at grazing angles by Schlick's rule, where Mitsuba evaluates
-    the exact conductor Fresnel equations: an approximation, said in a warning (a few
-    per cent at intermediate angles; equal at normal and grazing incidence)."""
+def _conductor_eta_k(r, el, p):
+    """A conductor's complex index of refraction eta + i k per channel, relative to
+    ext_eta: Mitsuba's named materials (its RGB values of their spectral data), or eta
+    and k given; 'none' (the default) is a perfect mirror (eta 0, k 1: reflectance 1)."""
     material = r.get(p, "material", "str", "none")
-    if material == "none" and "eta" not in p and "k" not in p:
-        return [1.0, 1.0, 1.0]
     if "eta" in p or "k" in p:
         if material != "none":
             raise r.error("give a conductor's material or its eta and k, not both", el)
         eta = np.array(r.get(p, "eta", "color", [0.0] * 3))
         k = np.array(r.get(p, "k", "color", [1.0] * 3))
-        what = "eta and k"
+    elif material == "none":
+        eta, k = np.zeros(3), np.ones(3)
     else:
         table = conductor_table()
         if material not in table:
             raise r.error(f"conductor material {material!r}: not one of Mitsuba's "
                           f"({', '.join(sorted(table))})", el)
         eta, k = table[material]
-        what = f"material {material!r}"
     ext = _ior(r, p, "ext_eta", 1.0)
-    n, kk = eta / ext, k / ext
-    f0 = ((n - 1) ** 2 + kk ** 2) / ((n + 1) ** 2 + kk ** 2)
-    r.warn(f"{el.get('type')} {what}: approximated by the principled BSDF's metallic lobe "
-           f"with the reflectance at normal incidence, {np.round(f0, 4).tolist()} (Schlick's "
-           "Fresnel where Mitsuba evaluates the conductor's exact one)", el)
-    return [float(x) for x in np.clip(f0, 0.0, 1.0)]
+    return [float(x) for x in eta / ext], [float(x) for x in k / ext]
+
+
+def _alpha_value(r, el, p, key):
+    """A microfacet alpha of Mitsuba (default 0.1): a number in [0, 1] or a texture."""
+    if key not in p:
+        return 0.1
+    tag, v = p[key]
+    if tag in ("texture", "ref"):
+        tex = _rgb_or_texture(r, el, p[key])
+        if isinstance(tex, dict):
+            tex["colorSpace"] = "linear"
+        return tex
+    alpha = _number(r, p[key], key)
+    if not 0 <= alpha <= 1:
+        raise r.error(f"{key} {alpha:g} outside [0, 1]", v)
+    return alpha
 
 
 def _only(r, el, p, allowed):
@@ -927,7 +970,7 @@ def _ior(r, p, key, default):
 def _roughness(r, el, p):
     """Mitsuba's microfacet alpha -> the principled roughness (alpha = roughness^2); its
     default distribution, Beckmann, is rendered as GGX of the same alpha (a warning)."""
-    _distribution(r, el, p)
+    _beckmann_as_ggx(r, el, p)
     if "alpha_u" in p or "alpha_v" in p:
         raise r.error("anisotropic alpha_u/alpha_v: supported on roughconductor only", el)
     alpha = _number(r, p["alpha"], "alpha") if "alpha" in p else 0.1
@@ -937,36 +980,19 @@ def _roughness(r, el, p):
 
 
 def _distribution(r, el, p):
-    """Mitsuba's microfacet distribution (its default: Beckmann), rendered as GGX of the
-    same alpha (the principled BSDF's); Beckmann with a warning."""
+    """Mitsuba's microfacet distribution (its default: Beckmann)."""
     dist = r.get(p, "distribution", "str", "beckmann")
     if dist not in ("ggx", "beckmann"):
         raise r.error(f"microfacet distribution {dist!r}: expected ggx or beckmann", el)
-    if dist == "beckmann":
+    return dist
+
+
+def _beckmann_as_ggx(r, el, p):
+    """The principled BSDF's microfacets are GGX: Beckmann is rendered as GGX of the same
+    alpha (a warning)."""
+    if _distribution(r, el, p) == "beckmann":
         r.warn("the Beckmann distribution is rendered as GGX with the same alpha (the "
                "principled BSDF's; GGX has the longer tails)", el)
-
-
-def _anisotropic_roughness(r, el, p):
-    """(roughness, anisotropic) of the principled BSDF for Mitsuba's alpha_u, alpha_v."""
-    _distribution(r, el, p)
-    au = _number(r, p["alpha_u"], "alpha_u") if "alpha_u" in p else 0.1
-    av = _number(r, p["alpha_v"], "alpha_v") if "alpha_v" in p else 0.1
-    if not (0 < au <= 1 and 0 < av <= 1):
-        raise r.error(f"alpha_u {au:g}, alpha_v {av:g}: expected (0, 1]", el)
-    # the principled lobe's alphas along the tangent (dp/du, as Mitsuba's frame) and the
-    # bitangent: roughness^2 / aspect and roughness^2 x aspect, aspect = sqrt(1 - 0.9
-    # anisotropic): so roughness^2 = sqrt(au av), aspect^2 = av / au, which needs av <= au
-    # and av / au >= 0.1 (else clamped, with a warning)
-    ratio = av / au
-    if ratio > 1 + 1e-6:
-        raise r.error(f"alpha_v {av:g} > alpha_u {au:g}: the principled BSDF stretches its "
-                      "lobe along the tangent (dp/du) only; not expressible", el)
-    if ratio < 0.1:
-        r.warn(f"alpha_v / alpha_u = {ratio:.3g}: the principled BSDF's anisotropy "
-               "stretches along the tangent by up to 1 / 0.1; clamped", el)
-        ratio = 0.1
-    return math.sqrt(math.sqrt(au * av)), (1 - ratio) / 0.9
 
 
 def _deref(r, el):
@@ -1104,6 +1130,9 @@ def _shape(r, el, out, materials):
         # an emitting shape gets its own copy of its material, with the emission
         base = next((dict(m_) for m_ in out["materials"] if m_["name"] == name),
                     {"type": "diffuse", "albedo": 0.5})
+        if base.get("alphaMode") == "mask" and base.get("alpha") == 0.0:
+            raise r.error("an area emitter on a surface with the null BSDF (light that "
+                          "rays pass through) is not supported", el)
         base["name"] = f"{obj['name']}-emitter"
         base["emission"] = emitter
         out["materials"].append(base)

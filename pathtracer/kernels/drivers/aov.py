@@ -9,7 +9,8 @@ from ..constants import ONE, ZERO
 from ..device import device, entry_marker
 from ..emitters import make_emitters
 from ..layout import (ALPHA_DIMS, D_ALPHA, AOV_ALBEDO, AOV_NORMAL, D_BSDF_LOBE, D_BSDF_U, D_BSDF_V,
-                      D_FIRST_BOUNCE, DIMS_PER_BOUNCE, P_BASE, P_METALLIC, P_ROUGHNESS,
+                      D_FIRST_BOUNCE, DIMS_PER_BOUNCE, MAT_CONDUCTOR, MAT_PRINCIPLED, P_BASE,
+                      P_COND_ALPHA_U, P_COND_ALPHA_V, P_METALLIC, P_ROUGHNESS,
                       P_TRANSMISSION, specialise)
 from ..path import Hit, make_path
 from ..rng import make_sampler
@@ -21,7 +22,18 @@ from ..vec import add, to_world
 AOV_SPECULAR_ROUGHNESS = np.float32(0.1)
 AOV_MAX_SPECULAR = 8        # specular surfaces followed at most
 HALF_F = np.float32(0.5)
+# (a conductor's alpha is the square of the principled BSDF's roughness)
+AOV_SPECULAR_ALPHA = np.float32(0.01)
 
+
+@device
+def aov_specular(kind, params):
+    """Is the material a mirror or clear glass, which the denoiser's albedo and normal
+    images look through?"""
+    if kind == MAT_CONDUCTOR:
+        return max(params[P_COND_ALPHA_U], params[P_COND_ALPHA_V]) < AOV_SPECULAR_ALPHA
+    return kind == MAT_PRINCIPLED and params[P_ROUGHNESS] < AOV_SPECULAR_ROUGHNESS \
+        and (params[P_METALLIC] > HALF_F or params[P_TRANSMISSION] > HALF_F)
 
 
 @device
@@ -86,8 +98,7 @@ def make_aov(features, target="cpu"):
                           clamp01(sh.params[P_BASE + 1] + le[1]),
                           clamp01(sh.params[P_BASE + 2] + le[2]))
                 normal = to_world(sh.wp, sh.tangent, sh.bitangent, sh.ns)
-                specular = sh.is_principled and sh.params[P_ROUGHNESS] < AOV_SPECULAR_ROUGHNESS \
-                    and (sh.params[P_METALLIC] > HALF_F or sh.params[P_TRANSMISSION] > HALF_F)
+                specular = aov_specular(sh.kind, sh.params)
                 if not specular or bounce == AOV_MAX_SPECULAR:
                     break
                 dim = D_FIRST_BOUNCE + bounce * DIMS_PER_BOUNCE
