@@ -35,7 +35,7 @@ def cparams(tint=(1.0, 1.0, 1.0), alpha_u=0.1, alpha_v=None, eta=(0.0, 0.0, 0.0)
 def test_matches_mitsuba_roughconductor():
     """eval (f |cos|) equal to Mitsuba 3.9.1's roughconductor at 64 direction pairs of 8
     cases (GGX and Beckmann, isotropic and anisotropic both ways, gold, aluminium and a
-    mirror's index), and the pdf where both sample the same way (GGX's visible normals).
+    mirror's index), and the pdf (both sample the visible normals).
     The table is Mitsuba's own output (tests/mitsuba_conductor_ref.py)."""
     t = np.load(TABLE)
     for c in range(len(t["values"])):
@@ -46,8 +46,10 @@ def test_matches_mitsuba_roughconductor():
                                     tuple(F(x) for x in t["wi"][j]))
             ref = t["values"][c, j]
             assert np.allclose(f, ref, rtol=2e-4, atol=1e-6), (c, j, f, ref)
-            if not t["distribution"][c]:
-                assert pdf == pytest.approx(t["pdfs"][c, j], rel=2e-4, abs=1e-6), (c, j)
+            # GGX: the same pdf; Beckmann: ours takes the exact Smith G1 (its sampler's
+            # density), Mitsuba's its rational fit of G1 (within 0.35 %)
+            rel = 2e-4 if not t["distribution"][c] else 4e-3
+            assert pdf == pytest.approx(t["pdfs"][c, j], rel=rel, abs=1e-6), (c, j)
 
 
 def test_matches_mitsuba_live():
@@ -147,6 +149,7 @@ CHI2_CASES = [
     ("beckmann", cparams(alpha_u=0.3, beckmann=True), 0.7),
     ("beckmann_grazing", cparams(alpha_u=0.6, beckmann=True), 0.15),
     ("beckmann_aniso", cparams(alpha_u=0.1, alpha_v=0.5, beckmann=True), 0.5),
+    ("beckmann_head_on", cparams(alpha_u=0.4, alpha_v=0.2, beckmann=True), 1.0),
 ]
 
 
@@ -225,3 +228,47 @@ def test_conductor_keys_are_checked(tmp_path):
     bad = {"name": "m", "type": "conductor", "metallic": 1.0}
     with pytest.raises(SceneError, match="metallic"):
         load_scene(write_scene(tmp_path, _sphere_scene(bad)))
+
+
+def _pane_scene(angle_deg, eta):
+    """A camera looking through a thin pane (turned by angle_deg about y) at an emissive
+    wall of radiance 1, small enough that the pane's reflections miss it; a black sky."""
+    quad = [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]
+    a = math.radians(angle_deg)
+    rot = [[math.cos(a), 0, math.sin(a), 0], [0, 1, 0, 0], [-math.sin(a), 0, math.cos(a), 0],
+           [0, 0, 0, 1]]
+    return {"camera": {"position": [0, 0, 4], "lookAt": [0, 0, 0], "fov": 4,
+                       "resolution": [8, 8]},
+            "render": {"spp": 256, "maxBounces": 4, "seed": 3},
+            "materials": [{"name": "pane", "type": "thindielectric", "eta": eta},
+                          {"name": "wall", "type": "diffuse", "albedo": 0, "emission": 1}],
+            "objects": [{"name": "pane", "vertices": quad, "faces": [[0, 1, 2], [0, 2, 3]],
+                         "material": "pane", "transform": {"matrix": rot}},
+                        {"name": "wall", "vertices": [[x * 0.8, y * 0.8, -2] for x, y, _ in quad],
+                         "faces": [[0, 1, 2], [0, 2, 3]], "material": "wall"}]}
+
+
+@pytest.mark.parametrize("angle,eta", [(0, 1.5), (60, 1.5), (75, 2.4)])
+def test_thin_dielectric_pane_transmits_one_minus_its_reflectance(tmp_path, angle, eta):
+    """Through a thin pane (Mitsuba's thindielectric) a wall of radiance 1 shows 1 - R',
+    R' = 2R / (1 + R), R the Fresnel reflectance at the view angle: the stochastic choice
+    between passing and the mirror is unbiased (a Bernoulli mean within 4 standard
+    errors). Checked against Mitsuba 3.9.1's thindielectric on a lit scene with
+    `bench.mitsuba_compare` (channel means 1.001-1.002, docs/benchmarks.md)."""
+    from pathtracer import load_scene
+    from pathtracer.kernels.principled import fresnel_dielectric
+    scene = load_scene(write_scene(tmp_path, _pane_scene(angle, eta)))
+    assert scene.compiled.features.alpha and scene.compiled.features.conductor
+    img = run(scene.compiled).film.image()
+    r = fresnel_dielectric(F(math.cos(math.radians(angle))), F(eta))[0]
+    t = 1 - 2 * r / (1 + r)
+    se = math.sqrt(t * (1 - t) / (256 * 64))
+    assert abs(img.mean() - t) < 4 * se + 1e-4, (img.mean(), t, se)
+
+
+def test_thin_dielectric_keys_are_checked(tmp_path):
+    from pathtracer import SceneError, load_scene
+    s = _pane_scene(0, 1.5)
+    s["materials"][0]["alphaMode"] = "blend"
+    with pytest.raises(SceneError, match="alphaMode"):
+        load_scene(write_scene(tmp_path, s))

@@ -89,6 +89,13 @@ MAT_WIDTH = 24
 ALPHA_OPAQUE = 0
 ALPHA_MASK = 1
 ALPHA_BLEND = 2
+# A thin dielectric pane (Mitsuba's thindielectric): a ray passes straight through with
+# probability 1 - R', R' = 2R / (1 + R) the pane's reflectance with its interreflections
+# summed, R the Fresnel reflectance of index M_THIN_ETA at the ray's angle to the
+# triangle; where it does not pass it meets the material, a perfect mirror. Stochastic
+# transparency again: unbiased, shadow rays included.
+ALPHA_THIN = 3
+M_THIN_ETA = M_ALPHA  # (ALPHA_THIN only: the pane's relative index of refraction)
 
 MAT_DIFFUSE = 0
 MAT_PRINCIPLED = 1

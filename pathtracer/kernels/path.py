@@ -32,13 +32,13 @@ from .camera import pinhole_ray, thin_lens_ray
 from .constants import INF, ONE, RR_MAX, ZERO
 from .device import device, step_marker
 from .emitters import make_emitters
-from .layout import (ALPHA_DIMS, D_ALPHA, D_ALPHA_SHADOW, CAM_CONE, D_BSDF_LOBE, D_BSDF_U, D_BSDF_V, D_FIRST_BOUNCE, D_LENS_U,
+from .layout import (ALPHA_DIMS, ALPHA_THIN, M_ALPHA_MODE, M_THIN_ETA, D_ALPHA, D_ALPHA_SHADOW, CAM_CONE, D_BSDF_LOBE, D_BSDF_U, D_BSDF_V, D_FIRST_BOUNCE, D_LENS_U,
                      D_LENS_V, D_LIGHT_SELECT, D_LIGHT_U, D_LIGHT_V, D_PIXEL_X, D_PIXEL_Y,
                      D_RR, DIMS_PER_BOUNCE, M_ONE_SIDED, P_TRANSMISSION, STAT_BOUNCE_RAYS,
                      STAT_NONFINITE, STAT_SHADOW_RAYS, TRI_E1, TRI_E2, TRI_V0, specialise)
 from .rng import make_pair_opener, make_sampler, sample_1d
 from .scatter import make_scatter
-from .surface import make_surface
+from .surface import make_surface, thin_pane_reflects
 from .textures import NO_FOOTPRINT, cone_footprint
 from .traverse import any_hit, closest_hit
 from .vec import add, cross, dot, load3, madd, max_comp, mul, neg, normalize, scale
@@ -165,13 +165,20 @@ def make_surface_steps(features, target="cpu"):
     hit_emission = emitters.hit_emission
 
     @step
-    def stops_ray(scene, tri, b1, b2, key, dim):
-        """Whether triangle tri's surface stops a ray at (b1, b2) (alpha: cut-outs and
-        stochastic transparency, surface.opacity_at, its number from the path's key and
-        dimension ``dim``)."""
+    def stops_ray(scene, tri, b1, b2, d, key, dim):
+        """Whether triangle tri's surface stops a ray along d at (b1, b2) (alpha: cut-outs,
+        stochastic transparency, surface.opacity_at, and thin dielectric panes,
+        surface.thin_pane_reflects; the number from the path's key and dimension
+        ``dim``)."""
+        m = scene.tri_mat[tri]
+        u = sample_1d(key, dim)
+        if scene.mat[m, M_ALPHA_MODE] == ALPHA_THIN:
+            ng = normalize(cross(load3(scene.tri_v, tri, TRI_E1),
+                                 load3(scene.tri_v, tri, TRI_E2)))
+            return thin_pane_reflects(scene.mat[m, M_THIN_ETA], abs(dot(d, ng)), u)
         tu, tv = tri_uv_at(scene.tri_uv, tri, b1, b2)
         return opacity_at(scene.mat, scene.mat_tex, scene.tex_data, scene.tex_int,
-                          scene.tex_f, scene.tri_mat[tri], tu, tv, sample_1d(key, dim))
+                          scene.tex_f, m, tu, tv, u)
 
     @step
     def trace_hit(scene, o, d, skip, key, dim, stack):
@@ -184,7 +191,7 @@ def make_surface_steps(features, target="cpu"):
         if ALPHA:
             t_done = ZERO
             k = 0
-            while tri >= 0 and k < ALPHA_DIMS and not stops_ray(scene, tri, b1, b2, key,
+            while tri >= 0 and k < ALPHA_DIMS and not stops_ray(scene, tri, b1, b2, d, key,
                                                                  dim + k):
                 # on from the hit point (from the triangle's own coordinates: not pushed
                 # off the surface, the triangle itself skipped)
@@ -210,7 +217,7 @@ def make_surface_steps(features, target="cpu"):
                                            scene.bvh_child, stack)
             if tri < 0 or tri == skips[1]:
                 return False
-            if stops_ray(scene, tri, b1, b2, key[0], key[1] + k):
+            if stops_ray(scene, tri, b1, b2, d, key[0], key[1] + k):
                 return True
             o = hit_point(scene.tri_v, tri, b1, b2)
             t_max -= t

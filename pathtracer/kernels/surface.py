@@ -28,6 +28,7 @@ from .layout import (ALPHA_BLEND, ALPHA_MASK, M_ALPHA, M_ALPHA_CUTOFF, M_ALPHA_M
                      TRI_T2, TRI_T_SIGN, TRI_UV0,
                      TRI_UV1, TRI_UV2, specialise)
 from .normalmap import clamp_mapped_normal, mapped_normal_seeing
+from .principled import fresnel_dielectric
 from .textures import NO_FOOTPRINT, make_tex_lookup
 from .vec import (add, cross, dot, frame, load3, luminance, madd, max_abs, neg, normalize,
                   scale)
@@ -78,6 +79,15 @@ def interpolate3(arr, tri, c0, c1, c2, b1, b2):
     b0 = ONE - b1 - b2
     return add(add(scale(load3(arr, tri, c0), b0), scale(load3(arr, tri, c1), b1)),
                scale(load3(arr, tri, c2), b2))
+
+
+@device
+def thin_pane_reflects(eta, cos_d, u):
+    """Does a ray at |cos| cos_d to a thin dielectric pane of index eta reflect (rather
+    than pass straight through)? With probability R' = 2R / (1 + R): the reflectance of
+    the pane's two interfaces with every interreflection (Mitsuba's thindielectric)."""
+    r = fresnel_dielectric(cos_d, eta)[0]
+    return u < TWO * r / (ONE + r)
 
 
 @device

@@ -33,7 +33,7 @@ from ..kernels.layout import (CAM_CONE, CAM_FOCUS, CAM_FORWARD, CAM_LENS_X, CAM_
                               ENV_TEXEL_WIDTH,
                               FILTER_BILINEAR, FILTER_NEAREST, FILTER_TRILINEAR,
                               LT_LINK_WIDTH, LT_WIDTH,
-                              ALPHA_BLEND, ALPHA_MASK, ALPHA_OPAQUE, M_ALPHA, M_ALPHA_CUTOFF,
+                              ALPHA_BLEND, ALPHA_MASK, ALPHA_OPAQUE, ALPHA_THIN, M_ALPHA, M_ALPHA_CUTOFF,
                               M_ALPHA_MODE, T_ALPHA,
                               M_ALBEDO, M_ANISOTROPIC, M_EMISSION, M_ETA, M_ONE_SIDED,
                               M_TWO_SIDED, M_TYPE, COND_BECKMANN, COND_GGX,
@@ -328,15 +328,15 @@ class MaterialTables:
         opacity, mode, cutoff = alpha
         row[M_ALPHA] = opacity
         row[M_ALPHA_MODE] = {"opaque": ALPHA_OPAQUE, "mask": ALPHA_MASK,
-                             "blend": ALPHA_BLEND}[mode]
+                             "blend": ALPHA_BLEND, "thin": ALPHA_THIN}[mode]
         row[M_ALPHA_CUTOFF] = cutoff
         if mode != "opaque" and "alpha" in textures:
             tex[T_ALPHA] = self.texture(textures["alpha"], "alpha")
         row[M_ALBEDO:M_ALBEDO + 3] = albedo
         row[M_EMISSION:M_EMISSION + 3] = emission
         row[M_TWO_SIDED] = 1.0 if two_sided else 0.0
-        row[M_TYPE] = {"principled": MAT_PRINCIPLED, "conductor": MAT_CONDUCTOR}.get(
-            mtype, MAT_DIFFUSE)
+        row[M_TYPE] = {"principled": MAT_PRINCIPLED, "conductor": MAT_CONDUCTOR,
+                       "thindielectric": MAT_CONDUCTOR}.get(mtype, MAT_DIFFUSE)
         power = float(np.mean(emission))
         if "albedo" in textures:
             tex[T_ALBEDO] = self.texture(textures["albedo"], "albedo")
@@ -348,6 +348,11 @@ class MaterialTables:
             power = float(np.mean(self.tex_images[t]) * np.mean(textures["emission"].scale))
         if mtype == "conductor":
             self._conductor(row, tex, numbers or {}, textures)
+        if mtype == "thindielectric":
+            # where a ray does not pass the pane, a perfect mirror (white: the pane's
+            # reflectance is the probability of meeting it)
+            row[M_ALBEDO:M_ALBEDO + 3] = 1.0
+            self._conductor(row, tex, {}, {})
         if normal_map is not None:
             tex[T_NORMAL] = self.texture(normal_map, "normalMap")
             self.any_normal_map = True

@@ -550,7 +550,8 @@ def _material(n, base):
     name = n.string("name")
     if name is None:
         raise n.error("missing required key 'name'")
-    mtype = n.string("type", "principled", choices=("principled", "diffuse", "conductor"))
+    mtype = n.string("type", "principled",
+                     choices=("principled", "diffuse", "conductor", "thindielectric"))
     if n.has("albedo") and n.has("baseColor"):
         raise n.error("give 'albedo' or 'baseColor', not both", "baseColor")
     m = Material(name=name, type=mtype, pointer=n.pointer)
@@ -579,6 +580,15 @@ def _material(n, base):
                 m.numbers[k] = n.number(k, lo=lo, hi=hi, lo_open=(k == "eta"))
         if n.has("normalMap"):
             m.normal_map = _texture_spec(n, "normalMap", base, "linear")
+    elif mtype == "thindielectric":
+        # a thin pane (Mitsuba's thindielectric): a mirror where a ray reflects, nothing
+        # where it passes (alpha mode "thin", kernels.layout.ALPHA_THIN)
+        for key in ("alphaMode", "alpha", "alphaCutoff"):
+            if n.has(key):
+                raise n.error(f"a thindielectric pane has no '{key}' (it is its own "
+                              "transparency)", key)
+        m.alpha_mode = "thin"
+        m.alpha = n.number("eta", 1.5, lo=0.0, hi=limits.MAX_IOR, lo_open=True)
     elif mtype == "conductor":
         _conductor(n, m, base)
         if n.has("normalMap"):

@@ -630,8 +630,9 @@ def _tan_half_fov_x(r, el, p, aspect):
     raise r.error(f"fov_axis {axis!r}: expected x, y, diagonal, smaller or larger", el)
 
 
-def _rgb_or_texture(r, el, tag_el):
-    """A colour or a bitmap texture value in the scene format."""
+def _rgb_or_texture(r, el, tag_el, scalar=False):
+    """A colour or a bitmap texture value in the scene format. ``scalar``: the value feeds
+    a number (Mitsuba reads it with ``eval_1``)."""
     tag, v = tag_el
     if tag == "ref":
         target = r.ids.get(v.get("id"))
@@ -663,6 +664,11 @@ def _rgb_or_texture(r, el, tag_el):
             # image looked up nearest and repeated, which is how it is rendered here
             c0 = r.get(tp, "color0", "color", [0.4] * 3)
             c1 = r.get(tp, "color1", "color", [0.2] * 3)
+            if scalar:
+                # Mitsuba 3.9.1's checkerboard gives the two values the other way round
+                # when a number is read from it (its eval_1 against its eval, checked
+                # live in tests/test_mitsuba_xml.py): its images are matched
+                c0, c1 = c1, c0
             img = np.array([[c0, c1], [c1, c0]], np.float32)
             buf = io.BytesIO()
             np.save(buf, img, allow_pickle=False)
@@ -716,7 +722,8 @@ def _bsdf(r, el, name):
     (diffuse, principled without transmission, conductors) are black from behind unless
     wrapped in twosided: oneSided (checked against Mitsuba 3.9.1's evaluation)."""
     mat = _bsdf_kind(r, el, name)
-    if el.get("type") not in ("twosided", "mask", "null") and not mat.get("transmission"):
+    if el.get("type") not in ("twosided", "mask", "null", "thindielectric") and \
+            not mat.get("transmission"):
         mat["oneSided"] = True
     return mat
 
@@ -744,7 +751,7 @@ def _bsdf_kind(r, el, name):
         mat = _bsdf(r, _deref(r, inner[0]), name)
         opacity = p.get("opacity", ("float", None))
         if opacity[0] in ("texture", "ref"):
-            mat["alpha"] = _rgb_or_texture(r, el, opacity)
+            mat["alpha"] = _rgb_or_texture(r, el, opacity, scalar=True)
         else:
             mat["alpha"] = min(max(float(r.value(opacity[1])), 0.0), 1.0) \
                 if opacity[1] is not None else 0.5
@@ -769,7 +776,7 @@ def _bsdf_kind(r, el, name):
                 if tag in ("texture", "ref") and PRINCIPLED_KEYS[k] in PRINCIPLED_TEXTURABLE:
                     # a textured number, read as the texture's luminance (as Mitsuba reads
                     # a colour texture given for a float parameter)
-                    tex = _rgb_or_texture(r, el, (tag, v))
+                    tex = _rgb_or_texture(r, el, (tag, v), scalar=True)
                     if isinstance(tex, dict):
                         tex["colorSpace"] = "linear"
                     mat[PRINCIPLED_KEYS[k]] = tex
@@ -780,8 +787,14 @@ def _bsdf_kind(r, el, name):
         return mat
     if kind in ("dielectric", "thindielectric", "roughdielectric"):
         if kind == "thindielectric":
-            raise r.error("thindielectric is not supported (a closed glass mesh with "
-                          "dielectric is)", el)
+            # a thin pane: reflects R' = 2R / (1 + R), passes the rest straight through
+            for key in ("specular_reflectance", "specular_transmittance"):
+                if key in p and r.get(p, key, "color") != [1.0, 1.0, 1.0]:
+                    raise r.error(f"thindielectric {key} other than 1 is not supported", el)
+            _only(r, el, p, ("int_ior", "ext_ior", "specular_reflectance",
+                             "specular_transmittance"))
+            return {"name": name, "type": "thindielectric",
+                    "eta": _ior(r, p, "int_ior", 1.5046) / _ior(r, p, "ext_ior", 1.000277)}
         eta = _ior(r, p, "int_ior", 1.5046) / _ior(r, p, "ext_ior", 1.000277)
         mat = {"name": name, "type": "principled", "albedo": 1.0, "transmission": 1.0,
                "roughness": 0.0, "eta": eta}
@@ -935,7 +948,7 @@ def _alpha_value(r, el, p, key):
         return 0.1
     tag, v = p[key]
     if tag in ("texture", "ref"):
-        tex = _rgb_or_texture(r, el, p[key])
+        tex = _rgb_or_texture(r, el, p[key], scalar=True)
         if isinstance(tex, dict):
             tex["colorSpace"] = "linear"
         return tex
