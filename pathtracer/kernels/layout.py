@@ -397,6 +397,7 @@ class Features(NamedTuple):
     vertex_colors: bool = False   # per-vertex colours multiply the base colour (tri_col)
     one_sided: bool = False       # a material that is black from behind (oneSided)
     alpha: bool = False           # a cut-out or stochastically transparent material
+    conductor: bool = False       # a conductor material (MAT_CONDUCTOR)
     # The principled parameters some material sets above 0 (or textures): the BSDF's parts
     # that need them are compiled only then (kernels.principled.Lobes). True by default:
     # a feature set built without them compiles the whole BSDF. dielectric: some principled
@@ -408,7 +409,6 @@ class Features(NamedTuple):
     flatness: bool = True      # the scene's "subsurface"
     spec_tint: bool = True
     anisotropic: bool = True
-    conductor: bool = False    # a conductor material (MAT_CONDUCTOR)
 
 
 class Specialisation(NamedTuple):
