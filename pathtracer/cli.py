@@ -430,9 +430,22 @@ def main(argv=None):
     if not args.debug:
         warnings.formatwarning = _one_line_warning
     try:
-        return _main(args)
+        code = _main(args)
     finally:
         warnings.formatwarning = format_warning
+    if argv is None and _EARLY_INTERRUPT[0] and not getattr(args, "ray", None):
+        # A signal that stopped Numba's compiler midway can leave LLVM's objects in a
+        # state that the interpreter's teardown frees twice (seen under load: "double
+        # free detected", exit -6 instead of 130). Nothing is left to write or clean up
+        # before the first pass: leave without the teardown.
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
+
+
+# set when a render was interrupted before its first pass (during compilation)
+_EARLY_INTERRUPT = [False]
 
 
 def _main(args):
@@ -480,10 +493,12 @@ def _one(args, scene_path, signals):
     try:
         return _render(args, scene_path, signals)
     except Interrupted as e:
+        _EARLY_INTERRUPT[0] = True
         print(f"pt-render: interrupted ({signal.Signals(e.signum).name}) before the first "
               "pass; nothing written", file=sys.stderr)
         return e.exit_code
     except KeyboardInterrupt:
+        _EARLY_INTERRUPT[0] = True
         print("pt-render: interrupted before the first pass; nothing written",
               file=sys.stderr)
         return 128 + signal.SIGINT
