@@ -11,6 +11,9 @@ Each is used where its reason is written down:
   the kernel cache's file locks and its recovery from damaged files;
 - ``numba.core.callconv.CPUCallConv.call_function(..., attrs=)``
   (``kernels.device._cpu_calls_kept``): the profiling aid that keeps chosen steps as calls;
+- ``numba.core.codegen.CPUCodeLibrary.finalize`` and ``numba.core.cpu.CPUContext.
+  get_executable`` (``kernels.device._link_only_cpu_libraries``): device functions compiled
+  as IR for the kernels to link, not optimised and emitted on their own at every level;
 - ``numba.cuda.core.callconv.MinimalCallConv.call_function`` (``backends.cuda``): the
   principled evaluation called, not inlined, on the GPU (+14-24 % on the HDRI scenes);
 - ``numba.cuda.cudadrv.driver._to_core_stream`` and a kernel's ``_codelibrary``
@@ -59,6 +62,14 @@ INTERNALS = (
     ("numba.core.callconv", "CPUCallConv.call_function",
      ["self", "builder", "callee", "resty", "argtys", "args", "attrs"],
      "kernels.device._cpu_calls_kept", False),
+    ("numba.core.codegen", "CPUCodeLibrary.finalize", ["self"],
+     "kernels.device._link_only_cpu_libraries", False),
+    ("numba.core.codegen", "CPUCodeLibrary._get_module_for_linking", ["self"],
+     "kernels.device._link_only_cpu_libraries", False),
+    ("numba.core.cpu", "CPUContext.get_executable", ["self", "library", "fndesc", "env"],
+     "kernels.device._link_only_cpu_libraries", False),
+    ("numba._dynfunc", "make_function", None, "kernels.device._link_only_cpu_libraries",
+     False),
     ("numba.cuda.core.callconv", "MinimalCallConv.call_function",
      ["self", "builder", "callee", "resty", "argtys", "args"], "backends.cuda", True),
     ("numba.cuda.cudadrv.driver", "_to_core_stream", None, "backends.launch", True),

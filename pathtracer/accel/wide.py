@@ -87,7 +87,8 @@ def _small_subtrees(child, limit):
 def _take_child(box, child, b, s, sub_first, sub_count, kid_box, kid_index, kid_count, k):
     """Child s of binary node b into slot k of the wide node being made: its box, and its
     (index, count), an inner node of a small subtree turned into a leaf over its range."""
-    kid_box[k, :] = box[b, s * BOX_STRIDE:(s + 1) * BOX_STRIDE]
+    for a in range(6):
+        kid_box[k, a] = box[b, s * BOX_STRIDE + a]
     kid_index[k] = child[b, s * CHILD_STRIDE + CHILD_INDEX]
     kid_count[k] = child[b, s * CHILD_STRIDE + CHILD_COUNT]
     if kid_count[k] == 0 and sub_count[kid_index[k]] > 0:
@@ -120,9 +121,12 @@ def _collapse(box, child, merge):
         n_todo -= 1
         b = todo_bin[n_todo]
         w = todo_wide[n_todo]
-        wbox[w, :] = np.nan
-        wchild[w, :] = 0
-        wchild[w, WCHILD_COUNT:WCHILD_COUNT + WIDTH] = -1
+        for q in range(wbox.shape[1]):
+            wbox[w, q] = np.nan
+        for q in range(WCHILD_WIDTH):
+            wchild[w, q] = 0
+        for j in range(WIDTH):
+            wchild[w, WCHILD_COUNT + j] = -1
         d = todo_depth[n_todo]
         depth = max(depth, d)
         k = 0
@@ -158,7 +162,8 @@ def _collapse(box, child, merge):
                     placed += 1
             if placed == 0:             # an inner node without children: drop it
                 k -= 1
-                kid_box[best, :] = kid_box[k, :]
+                for a in range(6):
+                    kid_box[best, a] = kid_box[k, a]
                 kid_index[best] = kid_index[k]
                 kid_count[best] = kid_count[k]
         for j in range(k):
@@ -194,7 +199,9 @@ def _pack(tri_v, wbox, wchild):
                 n_groups += (count + LANES - 1) // LANES
     wide = np.zeros((NODE_ROWS * n_nodes + GROUP_ROWS * n_groups, WIDE_ROW), np.float32)
     flat = wide.reshape(-1)
-    flat[:wbox.size] = wbox.reshape(-1)
+    for q in range(n_nodes):
+        for c in range(wbox.shape[1]):
+            wide[NODE_ROWS * q + c // WIDE_ROW, c % WIDE_ROW] = wbox[q, c]
     row = NODE_ROWS * n_nodes
     for node in range(n_nodes):
         for j in range(WIDTH):

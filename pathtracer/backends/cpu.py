@@ -1,9 +1,12 @@
-"""CPU backend: ``@njit(parallel=True)`` over image rows (interleaved over the threads),
-compiled code cached on disk."""
+"""CPU backend: a ``@njit(nogil=True)`` kernel over image rows, run on as many Python
+threads as Numba's thread count (rows interleaved over the threads), compiled code cached
+on disk."""
+import concurrent.futures
 import functools
+import threading
 
 import numpy as np
-from numba import get_num_threads, njit, prange
+from numba import get_num_threads, njit
 
 from .._cache import compile_lock, jit_cache, read_only
 from .base import Backend
@@ -32,23 +35,86 @@ def cpu_arrays(arrays, previous=None):
     return type(arrays)(*(read_only(a) for a in arrays)), (geometry, wide)
 
 
-@njit(cache=jit_cache())
-def interleaved_row(k, rows_per, threads):
-    """The image row of the kernels' prange index k (0 <= k < rows_per * threads, rows_per
-    = ceil(height / threads); rows >= height are skipped). prange hands each thread a
-    contiguous range of k; this mapping gives thread j the rows j, j + threads, ..., so
-    every thread gets rows from the whole image (the sky and the object), not one band."""
-    return (k % rows_per) * threads + k // rows_per
-
-
 def feature_bits(features):
     """A feature set as a string of 0s and 1s (the name of its kernels' compile lock)."""
     return "".join("1" if f else "0" for f in features)
 
 
+# Why threads and not ``prange``: a ``parallel=True`` kernel is compiled three more times
+# over (Numba's parfor pass types the loop's body again and wraps it in a gufunc and two
+# wrappers, each of which LLVM optimises and emits with the whole inlined path in it): the
+# Cornell box's kernel compiled in ~0.7x the time without it (docs/benchmarks.md, "Compile
+# time", 2026-12-08). The kernels release the GIL (nogil), so Python threads run them in
+# parallel as Numba's own threads did.
+_pools = {}
+_pools_lock = threading.Lock()
+
+
+def _pool(workers):
+    with _pools_lock:
+        if workers not in _pools:
+            _pools[workers] = concurrent.futures.ThreadPoolExecutor(
+                workers, thread_name_prefix="pt-render-cpu")
+        return _pools[workers]
+
+
+def _join(futures):
+    """Wait for every future, also through Ctrl-C (re-raised after): the threads write into
+    the pass's image, which is read only when all of them are done."""
+    interrupted = None
+    while True:
+        try:
+            concurrent.futures.wait(futures)
+            break
+        except KeyboardInterrupt as e:
+            interrupted = e
+    if interrupted is not None:
+        raise interrupted
+    for f in futures:
+        f.result()          # (a thread's error, raised here)
+
+
+class RowKernel:
+    """A compiled kernel ``rows(*args, first_row, row_step)`` that renders the image rows
+    first_row, first_row + row_step, ...; called as ``kernel(*args, threads)`` it runs on
+    ``threads`` threads, thread j taking the rows j, j + threads, ...: every thread gets
+    rows from the whole image (the sky and the object), not one band. The calling thread
+    renders its own share (and compiles or loads the kernel on the first call, before the
+    other threads start). ``signatures`` and ``overloads`` are the compiled kernel's (as a
+    Numba dispatcher's: _cache.compile_lock, bench.cpu_profile)."""
+
+    def __init__(self, rows):
+        self.rows = rows
+
+    @property
+    def signatures(self):
+        return self.rows.signatures
+
+    @property
+    def overloads(self):
+        return self.rows.overloads
+
+    def __call__(self, *args):
+        *args, threads = args
+        threads = max(1, int(threads))
+        if not self.rows.signatures:
+            # compile (or load) the kernel here, once, not in every thread at once: a call
+            # over no rows (the first row past any image)
+            self.rows(*args, NO_ROWS, 1)
+        futures = [_pool(threads - 1).submit(self.rows, *args, j, threads)
+                   for j in range(1, threads)]
+        try:
+            self.rows(*args, 0, threads)
+        finally:
+            _join(futures)
+
+
+NO_ROWS = 1 << 62
+
+
 @functools.lru_cache(maxsize=None)
 def pass_kernel(features):
-    """The pass kernel for scenes with ``features``: the driver that
+    """The pass kernel (a :class:`RowKernel`) for scenes with ``features``: the driver that
     kernels.drivers.choose_driver picks (deferred: each row's paths go through a ring whose
     records are finished a few paths later, the escaped rays' texels prefetched meanwhile;
     nested: render_pixel adds a pixel's paths itself)."""
@@ -60,22 +126,17 @@ def pass_kernel(features):
     ring = ESCAPE_RING if deferred else 0
 
     # error_model='numpy': float division by zero gives inf/nan as on the GPU, not an exception.
-    # nogil: other Python threads (the live preview's server) run while a pass renders.
+    # nogil: the kernel's threads (RowKernel) and other Python threads (the live preview's
+    # server) run while a pass renders.
     # fastmath: kernels.device.FAST_MATH_FLAGS (no nnan / ninf), as the GPU's default.
     # (branches on ``deferred``, a closure constant, are removed before typing)
-    @njit(parallel=True, nogil=True, cache=jit_cache(), error_model="numpy",
-          fastmath=set(FAST_MATH_FLAGS))
+    @njit(nogil=True, cache=jit_cache(), error_model="numpy", fastmath=set(FAST_MATH_FLAGS))
     def render_pass(out, stats, sample_start, n_samples, seed, max_bounces, rr_depth, scene,
-                    active, threads):
-        height = out.shape[0]
-        rows_per = (height + threads - 1) // threads
-        for k in prange(rows_per * threads):
-            py = interleaved_row(k, rows_per, threads)
-            if py >= height:
-                continue
-            stack = np.empty(WIDE_STACK_SIZE, np.int32)   # traversal scratch, per row
-            esc_f = np.empty((ring, ESC_F_WIDTH), np.float32)
-            esc_i = np.empty((ring, ESC_I_WIDTH), np.int32)
+                    active, first_row, row_step):
+        stack = np.empty(WIDE_STACK_SIZE, np.int32)   # traversal scratch
+        esc_f = np.empty((ring, ESC_F_WIDTH), np.float32)
+        esc_i = np.empty((ring, ESC_I_WIDTH), np.int32)
+        for py in range(first_row, out.shape[0], row_step):
             queued = 0
             for px in range(out.shape[1]):
                 if active[py, px]:
@@ -93,27 +154,21 @@ def pass_kernel(features):
             if deferred:
                 drain(esc_f, esc_i, queued, py, scene, out, stats)
 
-    return render_pass
+    return RowKernel(render_pass)
 
 
 @functools.lru_cache(maxsize=None)
 def aov_kernel(features):
     aov_pixel = make_aov_pixel(features)
 
-    @njit(parallel=True, nogil=True, cache=jit_cache(), error_model="numpy",
-          fastmath=set(FAST_MATH_FLAGS))
-    def aov_pass(out, n_samples, seed, scene, threads):
-        height = out.shape[0]
-        rows_per = (height + threads - 1) // threads
-        for k in prange(rows_per * threads):
-            py = interleaved_row(k, rows_per, threads)
-            if py >= height:
-                continue
-            stack = np.empty(WIDE_STACK_SIZE, np.int32)
+    @njit(nogil=True, cache=jit_cache(), error_model="numpy", fastmath=set(FAST_MATH_FLAGS))
+    def aov_pass(out, n_samples, seed, scene, first_row, row_step):
+        stack = np.empty(WIDE_STACK_SIZE, np.int32)
+        for py in range(first_row, out.shape[0], row_step):
             for px in range(out.shape[1]):
                 aov_pixel(px, py, n_samples, seed, scene, stack, out)
 
-    return aov_pass
+    return RowKernel(aov_pass)
 
 
 class CPUBackend(Backend):

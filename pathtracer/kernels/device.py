@@ -37,9 +37,18 @@ from numba.extending import register_jitable
 FAST_MATH_FLAGS = frozenset({"nsz", "arcp", "contract", "afn", "reassoc"})
 
 
+# Options of every device function. no_cfunc_wrapper: Numba otherwise compiles, for each
+# device function and each of its signatures, a C-callable wrapper (and emits its machine
+# code), which nothing calls: device functions are only called from other compiled code
+# (and, in the interpreted backend, as plain Python). Without them a CPU kernel compiles in
+# ~0.75x the time (Cornell box 23 -> 17.7 s cold on the 2-core Xeon, 2026-12-08;
+# docs/benchmarks.md). numba-cuda never builds these wrappers and accepts the option.
+DEVICE_OPTIONS = {"no_cfunc_wrapper": True}
+
+
 def device(fn):
     """Mark ``fn`` as device code shared by the CPU, CUDA and Python backends."""
-    return register_jitable(fn)
+    return register_jitable(**DEVICE_OPTIONS)(fn)
 
 
 def step_marker(target):
@@ -47,7 +56,7 @@ def step_marker(target):
     CPU always inlined by LLVM, elsewhere an ordinary device function."""
     if target == "cpu":
         return _always_inlined
-    return register_jitable
+    return device
 
 
 # qualified names of the functions marked as CPU steps (tests check that the compiled CPU
@@ -64,11 +73,10 @@ KEEP_CALLS = frozenset(filter(None, os.environ.get("PT_RENDER_CPU_CALLS", "").sp
 
 def _always_inlined(fn, **options):
     if fn.__name__ in KEEP_CALLS:
-        # (register_jitable() without options and without the function is an error)
-        return register_jitable(**options)(fn) if options else register_jitable(fn)
+        return register_jitable(**DEVICE_OPTIONS, **options)(fn)
     # a new register_jitable per function (see the module's docstring)
     CPU_INLINED.add(fn.__qualname__)
-    return register_jitable(forceinline=True, **options)(fn)
+    return register_jitable(forceinline=True, **DEVICE_OPTIONS, **options)(fn)
 
 
 def _always_inlined_entry(fn):
@@ -84,8 +92,8 @@ def entry_marker(target, inlined=False):
     if target == "cpu":
         if inlined:
             return _always_inlined_entry
-        return register_jitable(_nrt=False)
-    return register_jitable
+        return register_jitable(_nrt=False, **DEVICE_OPTIONS)
+    return device
 
 
 def _cpu_calls_kept():
@@ -112,3 +120,62 @@ def _cpu_calls_kept():
 
 if KEEP_CALLS:
     _cpu_calls_kept()
+
+
+def _link_only_cpu_libraries(prefix=__name__.rsplit(".", 1)[0] + "."):
+    """Compile the device functions of ``prefix`` (pathtracer.kernels) as LLVM IR to be
+    linked into the kernels, not as functions of their own.
+
+    Numba compiles each function it meets into its own code library and makes it
+    executable: it links the callees' IR in, runs LLVM's whole optimisation pipeline on the
+    result and emits machine code, which on the CPU (every step inlined into the pass's
+    loop) repeats the work for each level of the call tree: the path's bounce is optimised
+    and emitted in render_sample, again in render_pixel_nested, again in the kernel. A
+    device function is never called from Python, only from other compiled code, which links
+    its IR; so its library here only links its own callees' IR, and the kernel's library,
+    which Numba finalises as before, optimises and emits the whole once. (Its function
+    object has no machine code behind it; nothing calls it.) The Cornell box's CPU kernel
+    compiled in ~0.8x the time (docs/benchmarks.md, "Compile time", 2026-12-08). Skipped,
+    with everything compiled as Numba does, where the internals it uses are missing
+    (pathtracer.numba_internals)."""
+    try:
+        from numba._dynfunc import make_function
+        from numba.core import codegen, cpu
+        library_class, context_class = codegen.CPUCodeLibrary, cpu.CPUContext
+        finalize, get_executable = library_class.finalize, context_class.get_executable
+    except (ImportError, AttributeError):
+        return
+    if getattr(library_class, "_pt_render_link_only_installed", False):
+        return
+
+    def finalize_link_only(self):
+        if not getattr(self, "_pt_render_link_only", False):
+            return finalize(self)
+        # (Numba's finalize, less its optimisation, the engine and the machine code)
+        codegen.require_global_compiler_lock()
+        self._raise_if_finalized()
+        seen = set()
+        for library in self._linking_libraries:
+            if library not in seen:
+                self._reload_init.update(library._reload_init)
+                seen.add(library)
+                self._final_module.link_in(library._get_module_for_linking(),
+                                           preserve=True)
+        self._finalized = True
+
+    def get_executable_link_only(self, library, fndesc, env):
+        if not (fndesc.modname or "").startswith(prefix):
+            return get_executable(self, library, fndesc, env)
+        library._pt_render_link_only = True
+        library._ensure_finalized()
+        return make_function(fndesc.lookup_module(), fndesc.qualname.split(".")[-1],
+                             "pt-render device function (linked into kernels, not callable)",
+                             0, env, (library,))
+
+    library_class.finalize = finalize_link_only
+    context_class.get_executable = get_executable_link_only
+    library_class._pt_render_link_only = False
+    library_class._pt_render_link_only_installed = True
+
+
+_link_only_cpu_libraries()
