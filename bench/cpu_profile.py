@@ -69,7 +69,9 @@ def child(args):
                                 text=True).stdout
             for line in nm.splitlines():
                 parts = line.split()
-                if len(parts) == 4 and parts[2] in "tT":
+                # (t, T: local and global code; w, W: weak, the linkonce_odr copies of
+                # device functions that the kernel's own module holds, kernels.device)
+                if len(parts) == 4 and parts[2] in "tTwW":
                     try:
                         addr = lib.get_pointer_to_function(parts[3])
                     except Exception:

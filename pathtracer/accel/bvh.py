@@ -11,10 +11,11 @@ from typing import NamedTuple
 
 import numpy as np
 import numba
-from numba import njit, prange
+from numba import njit
 from numba.cpython.unsafe.numbers import leading_zeros, trailing_zeros
 
 from .._cache import jit_cache
+from ..threads import run_tasks
 from .simd import HI, ROW, bin_indices, centres, copy_row, min_into, swap_rows
 from ..kernels.constants import STACK_SIZE
 from ..kernels.layout import (BOX_CHILD0, BOX_CHILD1, BOX_MAX, BOX_MIN, BOX_STRIDE, BOX_WIDTH,
@@ -355,23 +356,50 @@ def _run(rows, order, tasks, task_box, n_tasks, box, child, n_bins, max_leaf,
     return n_nodes, max_depth, n_deferred
 
 
-@njit(cache=jit_cache())
 def _build(tri_rows, n_bins, max_leaf, min_leaf_split, midpoint, threads):
     """The tree, the triangle order, node count and depth. The per-triangle bounds
     (``tri_rows``, rows of accel.simd; scratch, changed) are reordered along with
     ``order`` (the partitions swap them; centres are computed from them where needed),
     so every pass reads them in sequence; a node's bounds come with its task (from the
     parent's bins and partition), so each range is read twice (bin, partition), not three
-    times. The top of the tree is built first, down to subtrees of at most 2/threads of
-    the triangles, which are then built in parallel (_subtrees) and the nodes numbered as
-    one sequential build numbers them (_assemble): the tree is exactly that of the plain
-    formulation, tests/bvh_oracle.build_plain (tested), for any thread count."""
+    times. The top of the tree is built first (_build_top), down to subtrees of at most
+    2/threads of the triangles, which are then built on threads (_subtree) and the nodes
+    numbered as one sequential build numbers them (_assemble): the tree is exactly that of
+    the plain formulation, tests/bvh_oracle.build_plain (tested), for any thread count."""
+    box, child, order, n_top, depth, deferred, deferred_box, n_def = _build_top(
+        tri_rows, n_bins, max_leaf, min_leaf_split, midpoint, threads)
+    if n_def == 0:
+        return box[:n_top].copy(), child[:n_top].copy(), order, n_top, depth
+    offsets = np.zeros(n_def + 1, np.int64)
+    offsets[1:] = np.cumsum(deferred[:n_def, 1] - deferred[:n_def, 0])
+    sub_box = np.zeros((offsets[n_def], BOX_WIDTH), np.float32)
+    sub_child = np.full((offsets[n_def], CHILD_WIDTH), CHILD_EMPTY, np.int32)
+    sub_nodes = np.zeros(n_def, np.int64)
+    sub_depth = np.zeros(n_def, np.int64)
+    run_tasks(_subtree, (tri_rows, order, deferred, deferred_box, offsets, sub_box, sub_child,
+                         sub_nodes, sub_depth, n_bins, max_leaf, min_leaf_split, midpoint),
+              n_def, threads)
+    depth = max(depth, int(sub_depth.max()))
+    out_box, out_child, total = _assemble(box, child, n_top, sub_box, sub_child, offsets,
+                                          sub_nodes)
+    return out_box, out_child, order, total, depth
+
+
+@njit(cache=jit_cache())
+def _build_top(tri_rows, n_bins, max_leaf, min_leaf_split, midpoint, threads):
+    """The top of the tree (all of it below PARALLEL_MIN triangles): its nodes, the
+    triangle order, node count, depth and the deferred subtrees' tasks (_run)."""
     n = tri_rows.shape[0]
     order = np.arange(n).astype(np.int32)
+    # Deferred tasks are children of top nodes of more than `defer` triangles, at most
+    # threads / 2 of them per depth: at most threads * (MAX_DEPTH + 1) deferred.
+    rows_def = max(threads, 1) * (MAX_DEPTH + 1) + 8
+    deferred = np.zeros((rows_def, 6), np.int64)
+    deferred_box = np.zeros((rows_def, 12))
     if n == 0:
         box = np.zeros((1, BOX_WIDTH), np.float32)
         child = np.full((1, CHILD_WIDTH), CHILD_EMPTY, np.int32)
-        return box, child, order, 1, 0
+        return box, child, order, 1, 0, deferred, deferred_box, 0
     # reordered in place: the caller's array is scratch (build_bvh makes it)
     n_rows = 4 * STACK_SIZE + 8
     tasks = np.zeros((n_rows, 6), np.int64)
@@ -381,57 +409,37 @@ def _build(tri_rows, n_bins, max_leaf, min_leaf_split, midpoint, threads):
     box = np.zeros((max(1, n), BOX_WIDTH), np.float32)
     child = np.full((max(1, n), CHILD_WIDTH), CHILD_EMPTY, np.int32)
     defer = (2 * n) // max(threads, 1) if n >= PARALLEL_MIN else 0
-    # Deferred tasks are children of top nodes of more than `defer` triangles, at most
-    # threads / 2 of them per depth: at most threads * (MAX_DEPTH + 1) deferred.
-    rows_def = max(threads, 1) * (MAX_DEPTH + 1) + 8
-    deferred = np.zeros((rows_def, 6), np.int64)
-    deferred_box = np.zeros((rows_def, 12))
     n_top, depth, n_def = _run(tri_rows, order, tasks, task_box, 1, box, child,
                                n_bins, max_leaf, min_leaf_split, midpoint, defer, deferred,
                                deferred_box)
-    if n_def == 0:
-        return box[:n_top].copy(), child[:n_top].copy(), order, n_top, depth
-    offsets = np.zeros(n_def + 1, np.int64)
-    for k in range(n_def):
-        offsets[k + 1] = offsets[k] + (deferred[k, 1] - deferred[k, 0])
-    sub_box = np.zeros((offsets[n_def], BOX_WIDTH), np.float32)
-    sub_child = np.full((offsets[n_def], CHILD_WIDTH), CHILD_EMPTY, np.int32)
-    sub_nodes = np.zeros(n_def, np.int64)
-    sub_depth = np.zeros(n_def, np.int64)
-    _subtrees(tri_rows, order, deferred, deferred_box, n_def, offsets, sub_box,
-              sub_child, sub_nodes, sub_depth, n_bins, max_leaf, min_leaf_split, midpoint)
-    for k in range(n_def):
-        depth = max(depth, sub_depth[k])
-    out_box, out_child, total = _assemble(box, child, n_top, sub_box, sub_child, offsets,
-                                          sub_nodes)
-    return out_box, out_child, order, total, depth
+    return box, child, order, n_top, depth, deferred, deferred_box, n_def
 
 
-@njit(parallel=True, cache=jit_cache())
-def _subtrees(tri_rows, order, deferred, deferred_box, n_def, offsets, sub_box,
-              sub_child, sub_nodes, sub_depth, n_bins, max_leaf, min_leaf_split, midpoint):
-    """Build each deferred subtree (disjoint triangle ranges) in parallel, subtree k into
-    rows offsets[k]... of sub_box/sub_child with its own node numbering (its root: 0)."""
-    for k in prange(n_def):
-        rows = 4 * STACK_SIZE + 8
-        tasks = np.zeros((rows, 6), np.int64)
-        task_box = np.zeros((rows, 12))
-        for c in range(6):
-            tasks[0, c] = deferred[k, c]
-        for c in range(12):
-            task_box[0, c] = deferred_box[k, c]
-        tasks[0, 2] = -1                       # the subtree's root: node 0 of its rows
-        lo = offsets[k]
-        hi = offsets[k + 1]
-        none = np.zeros((1, 6), np.int64)
-        none_box = np.zeros((1, 12))
-        # (defer as an int64, not the literal 0: a literal argument would make Numba
-        # compile a second _run for it, 7 s of the builder's ~20 s cold compile)
-        nodes, depth, _ = _run(tri_rows, order, tasks, task_box, 1, sub_box[lo:hi],
-                               sub_child[lo:hi], n_bins, max_leaf, min_leaf_split,
-                               midpoint, np.int64(0), none, none_box)
-        sub_nodes[k] = nodes
-        sub_depth[k] = depth
+@njit(nogil=True, cache=jit_cache())
+def _subtree(tri_rows, order, deferred, deferred_box, offsets, sub_box, sub_child,
+             sub_nodes, sub_depth, n_bins, max_leaf, min_leaf_split, midpoint, k):
+    """Build deferred subtree k (the subtrees' triangle ranges are disjoint: one thread
+    each) into rows offsets[k]... of sub_box/sub_child with its own node numbering (its
+    root: 0)."""
+    rows = 4 * STACK_SIZE + 8
+    tasks = np.zeros((rows, 6), np.int64)
+    task_box = np.zeros((rows, 12))
+    for c in range(6):
+        tasks[0, c] = deferred[k, c]
+    for c in range(12):
+        task_box[0, c] = deferred_box[k, c]
+    tasks[0, 2] = -1                       # the subtree's root: node 0 of its rows
+    lo = offsets[k]
+    hi = offsets[k + 1]
+    none = np.zeros((1, 6), np.int64)
+    none_box = np.zeros((1, 12))
+    # (defer as an int64, not the literal 0: a literal argument would make Numba
+    # compile a second _run for it, 7 s of the builder's ~20 s cold compile)
+    nodes, depth, _ = _run(tri_rows, order, tasks, task_box, 1, sub_box[lo:hi],
+                           sub_child[lo:hi], n_bins, max_leaf, min_leaf_split,
+                           midpoint, np.int64(0), none, none_box)
+    sub_nodes[k] = nodes
+    sub_depth[k] = depth
 
 
 @njit(cache=jit_cache())
@@ -520,54 +528,32 @@ def build_bvh(tri_verts, n_bins=16, max_leaf=8, split="sah", _plain=None, _threa
     return BVH(box, child, order, int(depth))
 
 
-@njit(parallel=True, cache=jit_cache())
 def _triangle_bounds(tri_verts):
-    """Per-triangle bounds (float32), in parallel; vertices are finite (the scene loader
-    checks)."""
-    n = tri_verts.shape[0]
-    lo = np.empty((n, 3), np.float32)
-    hi = np.empty((n, 3), np.float32)
-    for k in prange(n):
-        for a in range(3):
-            x0 = tri_verts[k, 0, a]
-            x1 = tri_verts[k, 1, a]
-            x2 = tri_verts[k, 2, a]
-            low = min(x0, min(x1, x2))
-            high = max(x0, max(x1, x2))
-            lo[k, a] = low
-            hi[k, a] = high
-    return lo, hi
+    """Per-triangle bounds (float32); vertices are finite (the scene loader checks)."""
+    return tri_verts.min(axis=1), tri_verts.max(axis=1)
 
 
-@njit(parallel=True, cache=jit_cache())
 def _triangle_rows(tri_verts):
-    """Per-triangle bounds as the builder's rows (accel.simd): lo, 0, -hi, 0 (float32)."""
-    n = tri_verts.shape[0]
-    rows = np.zeros((n, ROW), np.float32)
-    for k in prange(n):
-        for a in range(3):
-            x0 = tri_verts[k, 0, a]
-            x1 = tri_verts[k, 1, a]
-            x2 = tri_verts[k, 2, a]
-            rows[k, a] = min(x0, min(x1, x2))
-            rows[k, HI + a] = -max(x0, max(x1, x2))
+    """Per-triangle bounds as the builder's rows (accel.simd): lo, 0, -hi, 0 (float32).
+    (NumPy, not compiled: as fast here, and nothing to compile on a first run.)"""
+    rows = np.zeros((tri_verts.shape[0], ROW), np.float32)
+    lo, hi = _triangle_bounds(tri_verts)
+    rows[:, :3] = lo
+    rows[:, HI:HI + 3] = -hi
     return rows
 
 
-@njit(parallel=True, cache=jit_cache())
 def _widen(box):
     """Push every bound two float32 ulps outward, in place. A ray with a zero direction
     component whose origin lies exactly on a box face would otherwise get the slab
     (0 * BIG = 0) and miss the box; with widened boxes no triangle vertex lies on a face."""
     down = np.float32(-np.inf)
     up = np.float32(np.inf)
-    for k in prange(box.shape[0]):
-        for side in (BOX_CHILD0, BOX_CHILD1):
-            for c in range(3):
-                lo = box[k, side + BOX_MIN + c]
-                hi = box[k, side + BOX_MAX + c]
-                box[k, side + BOX_MIN + c] = np.nextafter(np.nextafter(lo, down), down)
-                box[k, side + BOX_MAX + c] = np.nextafter(np.nextafter(hi, up), up)
+    for side in (BOX_CHILD0, BOX_CHILD1):
+        lo = box[:, side + BOX_MIN:side + BOX_MIN + 3]
+        hi = box[:, side + BOX_MAX:side + BOX_MAX + 3]
+        lo[...] = np.nextafter(np.nextafter(lo, down), down)
+        hi[...] = np.nextafter(np.nextafter(hi, up), up)
 
 
 def sah_cost(bvh):

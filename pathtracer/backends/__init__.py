@@ -1,7 +1,7 @@
 """Backends: thin launchers of the kernel drivers (kernels.drivers), each implementing the
 protocol of :class:`.base.Backend`.
 
-``cpu`` (``@njit(parallel=True)``, rows in parallel), ``cuda`` (one thread per pixel) and
+``cpu`` (``@njit``, rows on every core's thread), ``cuda`` (one thread per pixel) and
 ``python`` (the same code interpreted: slow, for debugging one pixel).
 """
 

@@ -1,14 +1,13 @@
 """CPU backend: a ``@njit(nogil=True)`` kernel over image rows, run on as many Python
-threads as Numba's thread count (rows interleaved over the threads), compiled code cached
-on disk."""
-import concurrent.futures
+threads as Numba's thread count (rows interleaved over the threads; why threads and not
+``prange``: pathtracer.threads), compiled code cached on disk."""
 import functools
-import threading
 
 import numpy as np
 from numba import get_num_threads, njit
 
 from .._cache import compile_lock, jit_cache, read_only
+from ..threads import join, pool
 from .base import Backend
 
 from ..accel.wide import WIDE_STACK_SIZE, widen_bvh
@@ -40,40 +39,6 @@ def feature_bits(features):
     return "".join("1" if f else "0" for f in features)
 
 
-# Why threads and not ``prange``: a ``parallel=True`` kernel is compiled three more times
-# over (Numba's parfor pass types the loop's body again and wraps it in a gufunc and two
-# wrappers, each of which LLVM optimises and emits with the whole inlined path in it): the
-# Cornell box's kernel compiled in ~0.7x the time without it (docs/benchmarks.md, "Compile
-# time", 2026-12-08). The kernels release the GIL (nogil), so Python threads run them in
-# parallel as Numba's own threads did.
-_pools = {}
-_pools_lock = threading.Lock()
-
-
-def _pool(workers):
-    with _pools_lock:
-        if workers not in _pools:
-            _pools[workers] = concurrent.futures.ThreadPoolExecutor(
-                workers, thread_name_prefix="pt-render-cpu")
-        return _pools[workers]
-
-
-def _join(futures):
-    """Wait for every future, also through Ctrl-C (re-raised after): the threads write into
-    the pass's image, which is read only when all of them are done."""
-    interrupted = None
-    while True:
-        try:
-            concurrent.futures.wait(futures)
-            break
-        except KeyboardInterrupt as e:
-            interrupted = e
-    if interrupted is not None:
-        raise interrupted
-    for f in futures:
-        f.result()          # (a thread's error, raised here)
-
-
 class RowKernel:
     """A compiled kernel ``rows(*args, first_row, row_step)`` that renders the image rows
     first_row, first_row + row_step, ...; called as ``kernel(*args, threads)`` it runs on
@@ -101,12 +66,12 @@ class RowKernel:
             # compile (or load) the kernel here, once, not in every thread at once: a call
             # over no rows (the first row past any image)
             self.rows(*args, NO_ROWS, 1)
-        futures = [_pool(threads - 1).submit(self.rows, *args, j, threads)
+        futures = [pool(threads - 1).submit(self.rows, *args, j, threads)
                    for j in range(1, threads)]
         try:
             self.rows(*args, 0, threads)
         finally:
-            _join(futures)
+            join(futures)
 
 
 NO_ROWS = 1 << 62
