@@ -529,31 +529,58 @@ def build_bvh(tri_verts, n_bins=16, max_leaf=8, split="sah", _plain=None, _threa
 
 
 def _triangle_bounds(tri_verts):
-    """Per-triangle bounds (float32); vertices are finite (the scene loader checks)."""
-    return tri_verts.min(axis=1), tri_verts.max(axis=1)
+    """Per-triangle bounds (float32, N x 3 each); vertices are finite (the scene loader
+    checks)."""
+    rows = _triangle_rows(tri_verts)
+    return rows[:, :3].copy(), -rows[:, HI:HI + 3]
 
 
 def _triangle_rows(tri_verts):
-    """Per-triangle bounds as the builder's rows (accel.simd): lo, 0, -hi, 0 (float32).
-    (NumPy, not compiled: as fast here, and nothing to compile on a first run.)"""
+    """Per-triangle bounds as the builder's rows (accel.simd): lo, 0, -hi, 0 (float32), on
+    every thread."""
     rows = np.zeros((tri_verts.shape[0], ROW), np.float32)
-    lo, hi = _triangle_bounds(tri_verts)
-    rows[:, :3] = lo
-    rows[:, HI:HI + 3] = -hi
+    chunks = _chunks(tri_verts.shape[0])
+    run_tasks(_triangle_rows_chunk, (tri_verts, rows, chunks), chunks, chunks)
     return rows
+
+
+def _chunks(n):
+    """How many pieces a loop over n items is cut into for the threads (one below 64k)."""
+    return max(1, min(numba.get_num_threads(), n >> 16))
+
+
+@njit(nogil=True, cache=jit_cache())
+def _triangle_rows_chunk(tri_verts, rows, chunks, k):
+    n = tri_verts.shape[0]
+    for t in range(n * k // chunks, n * (k + 1) // chunks):
+        for a in range(3):
+            x0 = tri_verts[t, 0, a]
+            x1 = tri_verts[t, 1, a]
+            x2 = tri_verts[t, 2, a]
+            rows[t, a] = min(x0, min(x1, x2))
+            rows[t, HI + a] = -max(x0, max(x1, x2))
 
 
 def _widen(box):
     """Push every bound two float32 ulps outward, in place. A ray with a zero direction
     component whose origin lies exactly on a box face would otherwise get the slab
     (0 * BIG = 0) and miss the box; with widened boxes no triangle vertex lies on a face."""
+    chunks = _chunks(box.shape[0])
+    run_tasks(_widen_chunk, (box, chunks), chunks, chunks)
+
+
+@njit(nogil=True, cache=jit_cache())
+def _widen_chunk(box, chunks, k):
     down = np.float32(-np.inf)
     up = np.float32(np.inf)
-    for side in (BOX_CHILD0, BOX_CHILD1):
-        lo = box[:, side + BOX_MIN:side + BOX_MIN + 3]
-        hi = box[:, side + BOX_MAX:side + BOX_MAX + 3]
-        lo[...] = np.nextafter(np.nextafter(lo, down), down)
-        hi[...] = np.nextafter(np.nextafter(hi, up), up)
+    n = box.shape[0]
+    for t in range(n * k // chunks, n * (k + 1) // chunks):
+        for side in (BOX_CHILD0, BOX_CHILD1):
+            for c in range(3):
+                lo = box[t, side + BOX_MIN + c]
+                hi = box[t, side + BOX_MAX + c]
+                box[t, side + BOX_MIN + c] = np.nextafter(np.nextafter(lo, down), down)
+                box[t, side + BOX_MAX + c] = np.nextafter(np.nextafter(hi, up), up)
 
 
 def sah_cost(bvh):
