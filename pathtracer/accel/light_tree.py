@@ -166,9 +166,13 @@ def _bin_lights(data, start, end, dim, c_lo, extent, bins):
     every light's cone: not the smallest cone (pbrt-v4 unions cones light by light), but it
     holds them all and costs a dot product per light instead of inverse trigonometry; it
     only weighs the split (the tree's own nodes get exact unions)."""
-    bins[:, :] = 0.0
-    bins[:, R_COS_O] = 1.0
-    bins[:, R_COS_E] = 1.0
+    # (loops, not slice assignments: Numba compiles each of those slowly, seconds on a
+    # first run; docs/benchmarks.md, "Compile time")
+    for b in range(bins.shape[0]):
+        for c in range(bins.shape[1]):
+            bins[b, c] = 0.0
+        bins[b, R_COS_O] = 1.0
+        bins[b, R_COS_E] = 1.0
     for i in range(start, end):
         b = min(N_BINS - 1, int(N_BINS * (data[i, D_CENTRE + dim] - c_lo) / extent))
         if bins[b, R_POWER] <= 0:
@@ -263,10 +267,11 @@ def _build(lo, hi, axis, cos_o, cos_e, power, two_sided, node, link, leaf):
             leaf[k] = n
             continue
         # the node's box and its centroids' box
-        blo[:] = np.inf
-        bhi[:] = -np.inf
-        clo[:] = np.inf
-        chi[:] = -np.inf
+        for c in range(3):
+            blo[c] = np.inf
+            bhi[c] = -np.inf
+            clo[c] = np.inf
+            chi[c] = -np.inf
         for i in range(start, end):
             for c in range(3):
                 blo[c] = min(blo[c], data[i, D_LO + c])
@@ -291,12 +296,15 @@ def _build(lo, hi, axis, cos_o, cos_e, power, two_sided, node, link, leaf):
             edge = bhi[dim] - blo[dim]
             kr = diag_max / edge if edge > 0 else 1.0
             # prefix unions (bins 0..b), then suffix unions swept from the right
-            acc[:] = 0.0
+            for c in range(R_WIDTH):
+                acc[c] = 0.0
             for b in range(N_BINS - 1):
                 if bins[b, R_POWER] > 0:
                     _merge_row(acc, bins[b])
-                left[b, :] = acc
-            acc[:] = 0.0
+                for c in range(R_WIDTH):
+                    left[b, c] = acc[c]
+            for c in range(R_WIDTH):
+                acc[c] = 0.0
             for b in range(N_BINS - 1, 0, -1):
                 if bins[b, R_POWER] > 0:
                     _merge_row(acc, bins[b])
