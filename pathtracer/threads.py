@@ -9,6 +9,7 @@ function compiled with ``nogil=True`` releases the GIL while it runs, so the thr
 it in parallel as Numba's own would.
 """
 import concurrent.futures
+import os
 import threading
 
 _pools = {}
@@ -16,12 +17,15 @@ _pools_lock = threading.Lock()
 
 
 def pool(workers):
-    """A thread pool of ``workers`` threads (one per count, kept for the process)."""
+    """A thread pool of ``workers`` threads (one per count, kept for the process; keyed by
+    the process too: a child forked after a pool was made has none of its threads, and
+    work queued there would never run)."""
+    key = (os.getpid(), workers)
     with _pools_lock:
-        if workers not in _pools:
-            _pools[workers] = concurrent.futures.ThreadPoolExecutor(
+        if key not in _pools:
+            _pools[key] = concurrent.futures.ThreadPoolExecutor(
                 workers, thread_name_prefix="pt-render")
-        return _pools[workers]
+        return _pools[key]
 
 
 def join(futures):

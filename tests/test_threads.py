@@ -56,3 +56,32 @@ def test_join_waits_through_an_interrupt_and_raises_it_after(monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         threads.join(futures)
     assert len(calls) == 2 and done == [1, 1]
+
+
+def test_a_forked_child_gets_pools_of_its_own():
+    """A process forked after the parent's pool ran work still runs tasks (the parent's
+    pool threads do not exist in the child)."""
+    import multiprocessing
+    if "fork" not in multiprocessing.get_all_start_methods():
+        pytest.skip("no fork here")
+    threads.run_tasks(lambda out, k: out.append(k), ([],), 4, 2)     # the parent's pool
+    ctx = multiprocessing.get_context("fork")
+    q = ctx.Queue()
+    p = ctx.Process(target=_child_runs_tasks, args=(q,))
+    p.start()
+    p.join(60)
+    alive = p.is_alive()
+    if alive:
+        p.kill()
+    assert not alive and q.get(timeout=5) == [0, 1, 2, 3]
+
+
+def _child_runs_tasks(q):
+    seen = []
+    lock = threading.Lock()
+
+    def task(k):
+        with lock:
+            seen.append(k)
+    threads.run_tasks(task, (), 4, 2)
+    q.put(sorted(seen))
