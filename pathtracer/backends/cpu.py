@@ -7,7 +7,7 @@ import numpy as np
 from numba import get_num_threads, njit
 
 from .._cache import compile_lock, jit_cache, read_only
-from ..threads import join, pool
+from ..threads import run_tasks
 from .base import Backend
 
 from ..accel.wide import WIDE_STACK_SIZE, widen_bvh
@@ -40,12 +40,12 @@ def feature_bits(features):
 
 
 class RowKernel:
-    """A compiled kernel ``rows(*args, first_row, row_step)`` that renders the image rows
+    """A compiled kernel ``rows(*args, row_step, first_row)`` that renders the image rows
     first_row, first_row + row_step, ...; called as ``kernel(*args, threads)`` it runs on
-    ``threads`` threads, thread j taking the rows j, j + threads, ...: every thread gets
-    rows from the whole image (the sky and the object), not one band. The calling thread
-    renders its own share (and compiles or loads the kernel on the first call, before the
-    other threads start). ``signatures`` and ``overloads`` are the compiled kernel's (as a
+    ``threads`` threads (pathtracer.threads.run_tasks), thread j taking the rows j,
+    j + threads, ...: every thread gets rows from the whole image (the sky and the object),
+    not one band. The first call compiles or loads the kernel in the calling thread, before
+    the others start. ``signatures`` and ``overloads`` are the compiled kernel's (as a
     Numba dispatcher's: _cache.compile_lock, bench.cpu_profile)."""
 
     def __init__(self, rows):
@@ -65,13 +65,8 @@ class RowKernel:
         if not self.rows.signatures:
             # compile (or load) the kernel here, once, not in every thread at once: a call
             # over no rows (the first row past any image)
-            self.rows(*args, NO_ROWS, 1)
-        futures = [pool(threads - 1).submit(self.rows, *args, j, threads)
-                   for j in range(1, threads)]
-        try:
-            self.rows(*args, 0, threads)
-        finally:
-            join(futures)
+            self.rows(*args, 1, NO_ROWS)
+        run_tasks(self.rows, (*args, threads), threads, threads)
 
 
 NO_ROWS = 1 << 62
@@ -97,7 +92,7 @@ def pass_kernel(features):
     # (branches on ``deferred``, a closure constant, are removed before typing)
     @njit(nogil=True, cache=jit_cache(), error_model="numpy", fastmath=set(FAST_MATH_FLAGS))
     def render_pass(out, stats, sample_start, n_samples, seed, max_bounces, rr_depth, scene,
-                    active, first_row, row_step):
+                    active, row_step, first_row):
         stack = np.empty(WIDE_STACK_SIZE, np.int32)   # traversal scratch
         esc_f = np.empty((ring, ESC_F_WIDTH), np.float32)
         esc_i = np.empty((ring, ESC_I_WIDTH), np.int32)
@@ -127,7 +122,7 @@ def aov_kernel(features):
     aov_pixel = make_aov_pixel(features)
 
     @njit(nogil=True, cache=jit_cache(), error_model="numpy", fastmath=set(FAST_MATH_FLAGS))
-    def aov_pass(out, n_samples, seed, scene, first_row, row_step):
+    def aov_pass(out, n_samples, seed, scene, row_step, first_row):
         stack = np.empty(WIDE_STACK_SIZE, np.int32)
         for py in range(first_row, out.shape[0], row_step):
             for px in range(out.shape[1]):

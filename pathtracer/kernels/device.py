@@ -40,9 +40,9 @@ FAST_MATH_FLAGS = frozenset({"nsz", "arcp", "contract", "afn", "reassoc"})
 # Options of every device function. no_cfunc_wrapper: Numba otherwise compiles, for each
 # device function and each of its signatures, a C-callable wrapper (and emits its machine
 # code), which nothing calls: device functions are only called from other compiled code
-# (and, in the interpreted backend, as plain Python). Without them a CPU kernel compiles in
-# ~0.75x the time (Cornell box 23 -> 17.7 s cold on the 2-core Xeon, 2026-12-08;
-# docs/benchmarks.md). numba-cuda never builds these wrappers and accepts the option.
+# (and, in the interpreted backend, as plain Python). Without them the Cornell box's CPU
+# kernel compiled in ~0.87x the time (22.3-23.6 -> 19.5-20.6 s cold, alternating, 2-core
+# Xeon, 2026-12-08; docs/benchmarks.md, "Compile time"). numba-cuda never builds these wrappers and accepts the option.
 DEVICE_OPTIONS = {"no_cfunc_wrapper": True}
 
 
